@@ -1,0 +1,61 @@
+"""The body as the engine sees it: a triangle mesh in the world frame of DESIGN.md
+(metres, Y up, facing +Z, feet on y = 0, centred on x = z = 0), plus optional rig data."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# Segment labels (per vertex, uint8). Order matters: the value is the index.
+SEGMENTS = ("head", "torso", "left_arm", "right_arm", "left_leg", "right_leg")
+SEGMENT_ID = {name: i for i, name in enumerate(SEGMENTS)}
+
+
+@dataclass
+class Rig:
+    """Skeleton and linear-blend-skinning weights of a body in its rest pose.
+
+    joint_names: J names; parents: (J,) int32, -1 for the root;
+    rest_transforms: (J, 4, 4) float64 world transforms of the joints in the rest pose
+    (world frame of DESIGN.md); skin_indices / skin_weights: (N, K) int32 / float32,
+    K influences per vertex, weights summing to 1.
+    """
+
+    joint_names: list[str]
+    parents: np.ndarray
+    rest_transforms: np.ndarray
+    skin_indices: np.ndarray
+    skin_weights: np.ndarray
+
+
+@dataclass
+class Body:
+    """A normalised body mesh.
+
+    vertices: (N, 3) float64, metres, world frame; faces: (F, 3) int32, counter-clockwise
+    seen from outside; segments: (N,) uint8 indices into SEGMENTS, or None when unknown;
+    rig: skeleton + weights when the body can be posed (the default body), else None;
+    notes: human-readable lines about what loading did (units found, axes, repairs).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    name: str = "body"
+    segments: np.ndarray | None = None
+    rig: Rig | None = None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def height(self) -> float:
+        return float(self.vertices[:, 1].max() - self.vertices[:, 1].min())
+
+    def vertex_normals(self) -> np.ndarray:
+        """(N, 3) float64 area-weighted unit vertex normals."""
+        v, f = self.vertices, self.faces
+        fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        n = np.zeros_like(v)
+        for k in range(3):
+            np.add.at(n, f[:, k], fn)
+        length = np.linalg.norm(n, axis=1, keepdims=True)
+        return n / np.maximum(length, 1e-20)

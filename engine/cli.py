@@ -1,0 +1,134 @@
+"""The `tryon` command. Every subcommand turns engine errors into one line on stderr and a
+non-zero exit (2 for bad input, 3 for no OpenGL, 1 for an internal error)."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from engine.errors import GLUnavailableError, TryonError
+
+app = typer.Typer(add_completion=False, no_args_is_help=True,
+                  help="Virtual try-on: bodies, collision maps, cloth draping.")
+body_app = typer.Typer(no_args_is_help=True, help="Inspect bodies (scans or the default body).")
+app.add_typer(body_app, name="body")
+
+BODY_HELP = ("A mesh file (.obj .ply .stl .off .glb .gltf) or the default body: default:female, "
+             "default:male, optionally with shape parameters, e.g. default:female,height=1.72,weight=0.6")
+UP_HELP = "Up axis of a scan when detection is unsure: +x -x +y -y +z -z"
+FRONT_HELP = "Axis the scan faces when detection is unsure: +x -x +y -y +z -z"
+
+
+def _fail(msg: str, code: int) -> None:
+    typer.echo(f"error: {msg}", err=True)
+    raise typer.Exit(code)
+
+
+def _run(fn):
+    """Run a command body; engine errors become a one-line message and an exit code."""
+    try:
+        return fn()
+    except GLUnavailableError as e:
+        _fail(str(e), 3)
+    except TryonError as e:
+        _fail(str(e), 2)
+    except (typer.Exit, typer.Abort):
+        raise
+    except KeyboardInterrupt:
+        _fail("interrupted", 130)
+    except Exception as e:  # a bug: say so in one line; TRYON_DEBUG=1 shows the traceback
+        if os.environ.get("TRYON_DEBUG"):
+            raise
+        _fail(f"internal error ({type(e).__name__}: {e}); rerun with TRYON_DEBUG=1 for details", 1)
+
+
+def _body(spec: str, up: Optional[str], front: Optional[str]):
+    from engine.body import resolve_body
+
+    body = resolve_body(spec, up=up, front=front)
+    for line in body.notes:
+        typer.echo(f"note: {line}", err=True)
+    return body
+
+
+@body_app.command("info")
+def body_info(
+    body: str = typer.Argument(..., help=BODY_HELP),
+    as_json: bool = typer.Option(False, "--json", help="Print the measurements as JSON (centimetres)."),
+    up: Optional[str] = typer.Option(None, "--up", help=UP_HELP),
+    front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP),
+):
+    """Measure a body: height, circumferences, widths, lengths and landmark heights (cm)."""
+
+    def go():
+        from engine.body.measure import measure
+
+        b = _body(body, up, front)
+        m = measure(b)
+        if as_json:
+            typer.echo(json.dumps(m.to_dict(), indent=2))
+        else:
+            typer.echo(m.to_text())
+
+    _run(go)
+
+
+@app.command("maps")
+def maps_cmd(
+    body: str = typer.Argument(..., help=BODY_HELP),
+    out: Path = typer.Option(..., "--out", help="Directory for the map PNGs."),
+    texel: float = typer.Option(0.005, "--texel", help="Texel size in metres (seed 003 §5.4: 0.5 cm)."),
+    segments: Optional[str] = typer.Option(
+        None, "--segments", help="Comma-separated segments to render (head,torso,left_arm,right_arm,left_leg,right_leg); "
+        "default: the whole body in one map pair."),
+    up: Optional[str] = typer.Option(None, "--up", help=UP_HELP),
+    front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP),
+):
+    """Render the front/back depth, normal and velocity maps of a body and write them as PNGs."""
+
+    def go():
+        from engine.collide.maps import render_body_maps
+        from engine.io.mapviz import save_map_pngs
+
+        b = _body(body, up, front)
+        segs = [s.strip() for s in segments.split(",")] if segments else None
+        maps = render_body_maps(b, texel=texel, segments=segs)
+        written = save_map_pngs(maps, out)
+        for p in written:
+            typer.echo(str(p))
+
+    _run(go)
+
+
+@app.command("render")
+def render_cmd(
+    body: str = typer.Argument(..., help=BODY_HELP),
+    out: Path = typer.Option(..., "--out", help="PNG file to write."),
+    size: int = typer.Option(800, "--size", help="Picture height in pixels."),
+    view: str = typer.Option("front", "--view", help="front, side, back or three (all side by side)."),
+    up: Optional[str] = typer.Option(None, "--up", help=UP_HELP),
+    front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP),
+):
+    """Render a shaded picture of a body."""
+
+    def go():
+        from engine.io.render import render_body_png
+
+        b = _body(body, up, front)
+        render_body_png(b, out, size=size, view=view)
+        typer.echo(str(out))
+
+    _run(go)
+
+
+def main() -> None:
+    app()
+
+
+if __name__ == "__main__":
+    main()

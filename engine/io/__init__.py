@@ -1,0 +1,1 @@
+"""Outputs: PNG pictures of maps and bodies, meshes, recordings."""
