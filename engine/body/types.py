@@ -36,7 +36,8 @@ class Body:
     vertices: (N, 3) float64, metres, world frame; faces: (F, 3) int32, counter-clockwise
     seen from outside; segments: (N,) uint8 indices into SEGMENTS, or None when unknown;
     rig: skeleton + weights when the body can be posed (the default body), else None;
-    notes: human-readable lines about what loading did (units found, axes, repairs).
+    notes: human-readable lines about what loading did (units found, axes, repairs);
+    to_world: source-file coordinates -> world (see field comment).
     """
 
     vertices: np.ndarray
@@ -45,6 +46,9 @@ class Body:
     segments: np.ndarray | None = None
     rig: Rig | None = None
     notes: list[str] = field(default_factory=list)
+    # (4, 4) float64: maps the source file's coordinates (as loaded, any unit/axes) to this
+    # world frame. A GarmentCode spec made for that file's body uses it to keep its placement.
+    to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
 
     @property
     def height(self) -> float:
