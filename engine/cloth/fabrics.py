@@ -1,0 +1,68 @@
+"""Fabrics with physical parameters, from published measurements.
+
+Sources (typical values; real bolts vary by +-30 %):
+- Area density: fabric weights as sold. Cotton shirting/poplin 100-130 g/m^2; denim 12-14 oz/yd^2
+  (1 oz/yd^2 = 33.9 g/m^2, so 407-475 g/m^2); silk charmeuse 16-19 momme (1 momme = 4.3 g/m^2,
+  so 69-81 g/m^2); cotton single jersey 150-200 g/m^2.
+- Bending rigidity B and extensibility: Kawabata Evaluation System (KES-F) measurements,
+  S. Kawabata & M. Niwa, "Fabric performance in clothing and clothing manufacture", J. Textile
+  Inst. 80(1), 1989, and the KES-FB tables in B. K. Behera & P. K. Hari, "Woven textile structure"
+  (Woodhead 2010), ch. 11: B in gf.cm^2/cm (1 gf.cm^2/cm = 9.81e-5 N.m) ~0.05-0.15 for shirting,
+  0.5-1.5 for denim, 0.01-0.04 for silk, 0.02-0.06 for jersey; EMT (strain at 500 gf/cm) ~3-6 %
+  for shirting, 2-5 % for denim, 3-8 % for silk, 20-60 % for knit jersey. Stretch stiffness
+  here is the secant 500 gf/cm / EMT (= 490 N/m / EMT).
+- In-plane shear stiffness: KES-FB1 G (gf/cm.deg) ~0.5-1.5 for shirting, 1.5-4 for denim,
+  0.2-0.6 for silk, 0.2-0.5 for jersey; per radian: G * 0.981 N/m / (pi/180) = 56.2 N/m per unit.
+- Cloth-skin friction: Gwosdow et al., "Skin friction and fabric sensations in neutral and warm
+  environments", Textile Research J. 56(9), 1986: mu ~0.3-0.5 for cotton, ~0.25 for silk,
+  ~0.4-0.6 for denim and knits.
+- Strain thresholds for the velocity modification (seed 003 §4.3 uses 1-15 % by fabric type):
+  about the strain a garment shows in wear — small for woven fabrics, larger for knits.
+
+The simulation uses the measured stretch stiffness times `ClothParams.stiffness_scale` (default
+0.01): the velocity modification caps the strain at the threshold however soft the springs are,
+which is the point of seed 003 §4 — softer springs allow a larger stable time step (eq. 4).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from engine.errors import InputError
+
+GF_CM2_PER_CM = 9.81e-5  # N.m per gf.cm^2/cm (KES bending rigidity unit)
+G_UNIT = 56.2  # N/m per rad for 1 gf/(cm.deg) (KES shear stiffness unit)
+
+
+@dataclass(frozen=True)
+class Fabric:
+    name: str
+    density: float  # kg/m^2
+    stretch: float  # N/m, tensile stiffness (force per width per unit strain)
+    shear: float  # N/m, in-plane shear stiffness per radian
+    bending: float  # N.m, bending rigidity per unit width
+    friction: float  # cloth-skin Coulomb friction coefficient (dimensionless)
+    strain_threshold: float  # velocity modification threshold (fraction, seed 003 §4.3)
+    note: str = ""
+
+
+FABRICS: dict[str, Fabric] = {
+    f.name: f
+    for f in (
+        Fabric("cotton", density=0.120, stretch=490 / 0.045, shear=0.9 * G_UNIT, bending=0.10 * GF_CM2_PER_CM,
+               friction=0.40, strain_threshold=0.05, note="cotton shirting/poplin, 120 g/m^2"),
+        Fabric("denim", density=0.420, stretch=490 / 0.035, shear=2.5 * G_UNIT, bending=1.0 * GF_CM2_PER_CM,
+               friction=0.50, strain_threshold=0.03, note="12.5 oz/yd^2 denim, 420 g/m^2"),
+        Fabric("silk", density=0.075, stretch=490 / 0.05, shear=0.4 * G_UNIT, bending=0.025 * GF_CM2_PER_CM,
+               friction=0.25, strain_threshold=0.05, note="17.5 momme silk charmeuse, 75 g/m^2"),
+        Fabric("jersey", density=0.180, stretch=490 / 0.35, shear=0.3 * G_UNIT, bending=0.04 * GF_CM2_PER_CM,
+               friction=0.50, strain_threshold=0.15, note="cotton single jersey knit, 180 g/m^2"),
+    )
+}
+
+
+def get_fabric(name: str) -> Fabric:
+    try:
+        return FABRICS[name]
+    except KeyError:
+        raise InputError(f"unknown fabric '{name}'; choose one of: {', '.join(FABRICS)}") from None

@@ -1,0 +1,283 @@
+"""Small numba kernels of one cloth step (seed 003 §3-6, seed 000 §3, §5). NumPy/numba only.
+
+Arrays: x, v (N, 3) float64; springs given as CSR vertex adjacency (ptr (N+1,), other, sid)
+so force evaluation is a race-free gather, parallel over vertices.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+VM_ZERO, VM_AVERAGE, VM_DIRECTIONAL, VM_PROVOT = 0, 1, 2, 3
+VM_MODES = {"zero": VM_ZERO, "average": VM_AVERAGE, "directional": VM_DIRECTIONAL, "provot": VM_PROVOT}
+
+
+@njit(parallel=True, fastmath=True, cache=True)
+def eval_forces_and_integrate(x, v, inv_mass, mass, ptr, other, sid, rest, k,
+                              seam_ptr, seam_other, k_seam, gravity, damping,
+                              contact, contact_n, mu, dt, f_out):
+    """Per vertex: springs (eq. 2), seam pull (zero-rest-length springs), gravity, viscous
+    damping, then the reaction force of seed 000 eq. 16 where the vertex touched the body in
+    the previous step (cancel the force into the body, Coulomb friction on the tangential part),
+    then the velocity half of eq. 3: v += dt f / m. f_out keeps the force for diagnostics."""
+    n = x.shape[0]
+    for i in prange(n):
+        fx = mass[i] * gravity[0] - damping * mass[i] * v[i, 0]
+        fy = mass[i] * gravity[1] - damping * mass[i] * v[i, 1]
+        fz = mass[i] * gravity[2] - damping * mass[i] * v[i, 2]
+        for e in range(ptr[i], ptr[i + 1]):
+            j = other[e]
+            s = sid[e]
+            dx = x[j, 0] - x[i, 0]
+            dy = x[j, 1] - x[i, 1]
+            dz = x[j, 2] - x[i, 2]
+            length = np.sqrt(dx * dx + dy * dy + dz * dz)
+            if length > 1e-12:
+                c = k[s] * (length - rest[s]) / length
+                fx += c * dx
+                fy += c * dy
+                fz += c * dz
+        for e in range(seam_ptr[i], seam_ptr[i + 1]):
+            j = seam_other[e]
+            fx += k_seam * (x[j, 0] - x[i, 0])
+            fy += k_seam * (x[j, 1] - x[i, 1])
+            fz += k_seam * (x[j, 2] - x[i, 2])
+        if contact[i]:
+            nx, ny, nz = contact_n[i, 0], contact_n[i, 1], contact_n[i, 2]
+            fn = fx * nx + fy * ny + fz * nz
+            if fn < 0.0:  # pushing into the body: the body pushes back (eq. 16, -f_n)
+                tx, ty, tz = fx - fn * nx, fy - fn * ny, fz - fn * nz
+                ft = np.sqrt(tx * tx + ty * ty + tz * tz)
+                # friction: -C_fric f_t with C_fric = min(1, mu |f_n| / |f_t|) (Coulomb)
+                scale = 0.0
+                if ft > 1e-20:
+                    scale = max(0.0, 1.0 - mu * (-fn) / ft)
+                fx, fy, fz = tx * scale, ty * scale, tz * scale
+        f_out[i, 0] = fx
+        f_out[i, 1] = fy
+        f_out[i, 2] = fz
+        w = dt * inv_mass[i]
+        v[i, 0] += w * fx
+        v[i, 1] += w * fy
+        v[i, 2] += w * fz
+
+
+@njit(fastmath=True, cache=True)
+def modify_velocities(x, v, springs, rest, active, threshold, mode, gravity, dt, body_v, passes):
+    """Velocity modification against super-elasticity, after each step (Gauss-Seidel over the
+    springs). For a spring longer than (1 + threshold) x rest whose ends move apart, the
+    stretching (along-spring) velocity components v1t, v2t are changed:
+      VM_ZERO (seed 003 §4.3): both set to zero;
+      VM_AVERAGE (seed 000 eq. 5): both set to their average;
+      VM_DIRECTIONAL (seed 000 eq. 6 + §3.2 rules): v_dir = g dt + v_object; if the spring is
+        about perpendicular to v_dir (|cos| < 0.3) use eq. 5, else the rear point (along v_dir)
+        takes the front point's component so it catches up.
+    Returns the number of springs modified in the last pass."""
+    count = 0
+    for _ in range(passes):
+        count = 0
+        for s in range(springs.shape[0]):
+            if not active[s]:
+                continue
+            a = springs[s, 0]
+            b = springs[s, 1]
+            dx = x[b, 0] - x[a, 0]
+            dy = x[b, 1] - x[a, 1]
+            dz = x[b, 2] - x[a, 2]
+            length = np.sqrt(dx * dx + dy * dy + dz * dz)
+            if length <= (1.0 + threshold) * rest[s] or length < 1e-12:
+                continue
+            ux, uy, uz = dx / length, dy / length, dz / length
+            va = v[a, 0] * ux + v[a, 1] * uy + v[a, 2] * uz
+            vb = v[b, 0] * ux + v[b, 1] * uy + v[b, 2] * uz
+            if vb - va <= 0.0:  # already shortening: leave it
+                continue
+            count += 1
+            if mode == VM_ZERO:
+                na, nb = 0.0, 0.0
+            elif mode == VM_DIRECTIONAL:
+                gx = gravity[0] * dt + 0.5 * (body_v[a, 0] + body_v[b, 0])
+                gy = gravity[1] * dt + 0.5 * (body_v[a, 1] + body_v[b, 1])
+                gz = gravity[2] * dt + 0.5 * (body_v[a, 2] + body_v[b, 2])
+                gl = np.sqrt(gx * gx + gy * gy + gz * gz)
+                cos = 0.0 if gl < 1e-12 else (gx * ux + gy * uy + gz * uz) / gl
+                if abs(cos) < 0.3:
+                    na = nb = 0.5 * (va + vb)
+                elif cos > 0.0:  # p2 = b is ahead along v_dir: the rear a catches up
+                    na, nb = vb, vb
+                else:
+                    na, nb = va, va
+            else:  # VM_AVERAGE (and the velocity part of Provot's, which then moves positions)
+                na = nb = 0.5 * (va + vb)
+            v[a, 0] += (na - va) * ux
+            v[a, 1] += (na - va) * uy
+            v[a, 2] += (na - va) * uz
+            v[b, 0] += (nb - vb) * ux
+            v[b, 1] += (nb - vb) * uy
+            v[b, 2] += (nb - vb) * uz
+    return count
+
+
+@njit(fastmath=True, cache=True)
+def provot_positions(x, springs, rest, active, threshold, inv_mass, passes):
+    """Provot (1995) position modification, the comparison option: move the ends of springs
+    longer than (1 + threshold) x rest toward each other (mass-weighted) back to that length."""
+    for _ in range(passes):
+        for s in range(springs.shape[0]):
+            if not active[s]:
+                continue
+            a = springs[s, 0]
+            b = springs[s, 1]
+            dx = x[b, 0] - x[a, 0]
+            dy = x[b, 1] - x[a, 1]
+            dz = x[b, 2] - x[a, 2]
+            length = np.sqrt(dx * dx + dy * dy + dz * dz)
+            lmax = (1.0 + threshold) * rest[s]
+            if length <= lmax or length < 1e-12:
+                continue
+            wa, wb = inv_mass[a], inv_mass[b]
+            corr = (length - lmax) / (length * (wa + wb))
+            x[a, 0] += wa * corr * dx
+            x[a, 1] += wa * corr * dy
+            x[a, 2] += wa * corr * dz
+            x[b, 0] -= wb * corr * dx
+            x[b, 1] -= wb * corr * dy
+            x[b, 2] -= wb * corr * dz
+
+
+@njit(parallel=True, fastmath=True, cache=True)
+def collision_points(x, v, dt, quads, tris, p_out, pv_out):
+    """Points checked against the body: every vertex, every quad midpoint and triangle centroid
+    (face-body checks, seed 003 §6), at their predicted positions x + dt v."""
+    n = x.shape[0]
+    nq = quads.shape[0]
+    for i in prange(n):
+        for c in range(3):
+            p_out[i, c] = x[i, c] + dt * v[i, c]
+            pv_out[i, c] = v[i, c]
+    for q in prange(nq):
+        for c in range(3):
+            sx = 0.0
+            sv = 0.0
+            for r in range(4):
+                sx += x[quads[q, r], c]
+                sv += v[quads[q, r], c]
+            pv_out[n + q, c] = 0.25 * sv
+            p_out[n + q, c] = 0.25 * sx + dt * 0.25 * sv
+    for t in prange(tris.shape[0]):
+        for c in range(3):
+            sx = 0.0
+            sv = 0.0
+            for r in range(3):
+                sx += x[tris[t, r], c]
+                sv += v[tris[t, r], c]
+            pv_out[n + nq + t, c] = sv / 3.0
+            p_out[n + nq + t, c] = sx / 3.0 + dt * sv / 3.0
+
+
+@njit(fastmath=True, cache=True)
+def _respond(vx, vy, vz, nx, ny, nz, bx, by, bz, depth, tol, refl, mu, dt):
+    """Eq. 12 / eq. 15 for one point: relative velocity to the body, reflected normal part
+    (C_refl), Coulomb friction on the tangential part (C_fric = max(0, 1 - mu |dv_n| / |v_t|)),
+    and a push that takes a point deeper than the tolerance band back out within ~2 steps."""
+    rx, ry, rz = vx - bx, vy - by, vz - bz
+    vn = rx * nx + ry * ny + rz * nz
+    tx, ty, tz = rx - vn * nx, ry - vn * ny, rz - vn * nz
+    new_vn = vn
+    if vn < 0.0:
+        new_vn = -refl * vn
+    push = 0.5 * (depth - 0.5 * tol) / dt  # depth: metres inside the surface + band
+    if push > new_vn:
+        new_vn = push
+    dvn = new_vn - vn
+    if dvn < 0.0:
+        dvn = 0.0
+    vt = np.sqrt(tx * tx + ty * ty + tz * tz)
+    cf = 1.0
+    if vt > 1e-12:
+        cf = max(0.0, 1.0 - mu * dvn / vt)
+    return (cf * tx + new_vn * nx + bx, cf * ty + new_vn * ny + by, cf * tz + new_vn * nz + bz)
+
+
+@njit(fastmath=True, cache=True)
+def collision_response(v, status, normal, body_v, depth, pv, n_vertices, quads, tris,
+                       tol, refl, mu, dt, contact, contact_n, vbody_out):
+    """Apply the responses of vertex and face checks: a face's resulting velocity goes to all its
+    corners; a vertex with several responses gets their average (seed 003 §6). Marks contacts
+    (used by next step's reaction force) and records the body velocity seen by each vertex."""
+    n = n_vertices
+    acc = np.zeros((n, 3))
+    cnt = np.zeros(n, dtype=np.int32)
+    hits = 0
+    for i in range(n):
+        contact[i] = False
+        vbody_out[i, 0] = 0.0
+        vbody_out[i, 1] = 0.0
+        vbody_out[i, 2] = 0.0
+    m = status.shape[0]
+    for p in range(m):
+        if status[p] == 0:
+            continue
+        hits += 1
+        rx, ry, rz = _respond(pv[p, 0], pv[p, 1], pv[p, 2], normal[p, 0], normal[p, 1], normal[p, 2],
+                              body_v[p, 0], body_v[p, 1], body_v[p, 2], depth[p], tol, refl, mu, dt)
+        if p < n:
+            corners = 1
+        elif p < n + quads.shape[0]:
+            corners = 4
+        else:
+            corners = 3
+        for r in range(corners):
+            if p < n:
+                i = p
+            elif corners == 4:
+                i = quads[p - n, r]
+            else:
+                i = tris[p - n - quads.shape[0], r]
+            acc[i, 0] += rx
+            acc[i, 1] += ry
+            acc[i, 2] += rz
+            cnt[i] += 1
+            contact[i] = True
+            contact_n[i, 0] = normal[p, 0]
+            contact_n[i, 1] = normal[p, 1]
+            contact_n[i, 2] = normal[p, 2]
+            vbody_out[i, 0] = body_v[p, 0]
+            vbody_out[i, 1] = body_v[p, 1]
+            vbody_out[i, 2] = body_v[p, 2]
+    for i in range(n):
+        if cnt[i] > 0:
+            v[i, 0] = acc[i, 0] / cnt[i]
+            v[i, 1] = acc[i, 1] / cnt[i]
+            v[i, 2] = acc[i, 2] / cnt[i]
+    return hits
+
+
+@njit(parallel=True, fastmath=True, cache=True)
+def integrate_positions(x, v, dt):
+    """The position half of eq. 3: p += dt v."""
+    for i in prange(x.shape[0]):
+        x[i, 0] += dt * v[i, 0]
+        x[i, 1] += dt * v[i, 1]
+        x[i, 2] += dt * v[i, 2]
+
+
+@njit(parallel=True, fastmath=True, cache=True)
+def kinetic_energy(v, mass):
+    e = 0.0
+    for i in prange(v.shape[0]):
+        e += 0.5 * mass[i] * (v[i, 0] ** 2 + v[i, 1] ** 2 + v[i, 2] ** 2)
+    return e
+
+
+@njit(parallel=True, fastmath=True, cache=True)
+def max_strain(x, springs, rest, active):
+    out = np.zeros(springs.shape[0])
+    for s in prange(springs.shape[0]):
+        if active[s]:
+            a = springs[s, 0]
+            b = springs[s, 1]
+            d = np.sqrt((x[b, 0] - x[a, 0]) ** 2 + (x[b, 1] - x[a, 1]) ** 2 + (x[b, 2] - x[a, 2]) ** 2)
+            out[s] = d / rest[s] - 1.0
+    return out.max() if out.shape[0] else 0.0

@@ -1,0 +1,195 @@
+"""The static part of a cloth (Warp/Newton's Model): masses, springs, faces, seams, time step.
+The changing part is ClothState (positions, velocities).
+
+Springs (seed 003 §3): structural along every mesh edge, shear across every quad's diagonals,
+flexion between grid vertices two apart (and across the edges of the triangles in the band
+along the outline). Rest lengths come from the flat pattern, so the cloth is unstretched when
+it lies flat. Stiffness from the fabric (engine.cloth.fabrics):
+  structural: k = stretch * stiffness_scale   (a grid spring carries a strip as wide as long)
+  shear:      k = shear                       (diagonal springs: k = G for small shear angles)
+  flexion:    k = bending / h^2               (resists the in-plane compression folds make)
+Time step: eq. 4, dt <= 0.4 pi sqrt(m / K), evaluated per spring with the lighter end's mass.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from engine.cloth.fabrics import Fabric
+from engine.errors import InputError
+
+STRUCTURAL, SHEAR, FLEXION = 0, 1, 2
+EQ4_FACTOR = 0.4 * np.pi
+
+
+@dataclass(frozen=True)
+class ClothParams:
+    """Simulation parameters that are not fabric properties."""
+
+    stiffness_scale: float = 0.01  # measured stretch stiffness x this (see fabrics.py)
+    damping: float = 0.02  # viscous damping per unit mass, 1/s ... times mass gives C_vd (N.s/m)
+    reflection: float = 0.0  # C_refl of eq. 12 (0: the cloth does not bounce off the body)
+    tolerance: float = 0.005  # collision tolerance band, metres (seed 003 §5.4)
+    velocity_mode: str = "average"  # zero (seed 003) | average (seed 000 eq. 5) | directional (eq. 6) | provot
+    vm_passes: int = 2  # Gauss-Seidel passes of the velocity modification per step
+
+
+@dataclass
+class ClothModel:
+    """Arrays (N vertices, S springs): mass (N,), inv_mass (N,), springs (S, 2) int32,
+    rest (S,), stiffness (S,), kind (S,) int8; CSR vertex->spring adjacency adj_ptr (N+1,),
+    adj_other (2S,), adj_spring (2S,); faces quads (Q, 4) / tris (T, 3); seams (P, 2)."""
+
+    mass: np.ndarray
+    inv_mass: np.ndarray
+    springs: np.ndarray
+    rest: np.ndarray
+    stiffness: np.ndarray
+    kind: np.ndarray
+    adj_ptr: np.ndarray
+    adj_other: np.ndarray
+    adj_spring: np.ndarray
+    quads: np.ndarray
+    tris: np.ndarray
+    seams: np.ndarray
+    fabric: Fabric
+    params: ClothParams
+    dt_bound: float
+    edge_length: float
+
+    @property
+    def n(self) -> int:
+        return len(self.mass)
+
+
+@dataclass
+class ClothState:
+    x: np.ndarray  # (N, 3) float64 positions
+    v: np.ndarray  # (N, 3) float64 velocities
+
+    def copy(self) -> "ClothState":
+        return ClothState(self.x.copy(), self.v.copy())
+
+
+def _unique_pairs(pairs: np.ndarray) -> np.ndarray:
+    p = np.sort(pairs, axis=1)
+    p = p[p[:, 0] != p[:, 1]]
+    return np.unique(p, axis=0)
+
+
+def build_springs(uv: np.ndarray, panel: np.ndarray, lattice: np.ndarray, quads: np.ndarray,
+                  tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(S, 2) int32 springs and (S,) int8 kinds from the flat mesh."""
+    edges = [quads[:, [0, 1]], quads[:, [1, 2]], quads[:, [2, 3]], quads[:, [3, 0]],
+             tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]
+    structural = _unique_pairs(np.concatenate(edges))
+    shear = _unique_pairs(np.concatenate([quads[:, [0, 2]], quads[:, [1, 3]]]))
+    # flexion on the grid: (i, j) - (i + 2, j) and (i, j) - (i, j + 2), same panel, middle present
+    on = np.flatnonzero(lattice[:, 0] >= 0)
+    key = {(int(panel[v]), int(lattice[v, 0]), int(lattice[v, 1])): int(v) for v in on}
+    flex = []
+    for v in on:
+        p, i, j = int(panel[v]), int(lattice[v, 0]), int(lattice[v, 1])
+        for di, dj in ((1, 0), (0, 1)):
+            mid = key.get((p, i + di, j + dj))
+            far = key.get((p, i + 2 * di, j + 2 * dj))
+            if mid is not None and far is not None:
+                flex.append((v, far))
+    # flexion across the band's triangle edges: the two vertices opposite a shared edge
+    if len(tris):
+        te = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+        opp = np.concatenate([tris[:, 2], tris[:, 0], tris[:, 1]])
+        k = np.sort(te, axis=1)
+        order = np.lexsort((k[:, 1], k[:, 0]))
+        ks, os_ = k[order], opp[order]
+        same = np.all(ks[1:] == ks[:-1], axis=1)
+        idx = np.flatnonzero(same)
+        flex += list(zip(os_[idx].tolist(), os_[idx + 1].tolist()))
+    flex = _unique_pairs(np.asarray(flex, dtype=np.int64).reshape(-1, 2)) if flex else np.zeros((0, 2), np.int64)
+    # a structural/shear pair is not also a flexion spring
+    if len(flex):
+        taken = {tuple(p) for p in np.concatenate([structural, shear]).tolist()}
+        flex = np.asarray([p for p in flex.tolist() if tuple(p) not in taken], dtype=np.int64).reshape(-1, 2)
+    springs = np.concatenate([structural, shear, flex]).astype(np.int32)
+    kind = np.concatenate([np.full(len(structural), STRUCTURAL), np.full(len(shear), SHEAR),
+                           np.full(len(flex), FLEXION)]).astype(np.int8)
+    return springs, kind
+
+
+def lumped_mass(uv: np.ndarray, quads: np.ndarray, tris: np.ndarray, density: float) -> np.ndarray:
+    """(N,) kg: each face's mass shared equally by its corners (areas from the flat pattern)."""
+    m = np.zeros(len(uv))
+    if len(quads):
+        a = uv[quads]
+        area = 0.5 * np.abs(np.cross(a[:, 2] - a[:, 0], a[:, 3] - a[:, 1]))
+        np.add.at(m, quads.ravel(), np.repeat(area / 4.0, 4))
+    if len(tris):
+        a = uv[tris]
+        area = 0.5 * np.abs(np.cross(a[:, 1] - a[:, 0], a[:, 2] - a[:, 0]))
+        np.add.at(m, tris.ravel(), np.repeat(area / 3.0, 3))
+    return m * density
+
+
+def csr_adjacency(n: int, springs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    a, b = springs[:, 0], springs[:, 1]
+    ends = np.concatenate([a, b])
+    other = np.concatenate([b, a])
+    sid = np.concatenate([np.arange(len(springs)), np.arange(len(springs))])
+    order = np.argsort(ends, kind="stable")
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    np.add.at(ptr, ends + 1, 1)
+    return np.cumsum(ptr), other[order].astype(np.int32), sid[order].astype(np.int32)
+
+
+def build_model(uv: np.ndarray, panel: np.ndarray, lattice: np.ndarray, quads: np.ndarray,
+                tris: np.ndarray, seams: np.ndarray, fabric: Fabric, h: float,
+                params: ClothParams | None = None) -> ClothModel:
+    """Build the model from the flat (unsewn) mesh; weld_model() merges sewn vertices later."""
+    params = params or ClothParams()
+    if params.stiffness_scale <= 0 or not np.isfinite(params.stiffness_scale):
+        raise InputError(f"stiffness scale must be positive, got {params.stiffness_scale}")
+    springs, kind = build_springs(uv, panel, lattice, quads, tris)
+    a, b = springs[:, 0], springs[:, 1]
+    rest = np.linalg.norm(uv[a] - uv[b], axis=1)
+    if np.any(rest <= 1e-6):
+        raise InputError("the cloth mesh has coincident vertices (a spring of zero rest length)")
+    k = spring_stiffness(kind, fabric, params, h)
+    mass = lumped_mass(uv, quads, tris, fabric.density)
+    if np.any(mass <= 0):
+        raise InputError("the cloth mesh has vertices that belong to no face")
+    return _assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, h)
+
+
+def spring_stiffness(kind: np.ndarray, fabric: Fabric, params: ClothParams, h: float) -> np.ndarray:
+    return np.where(kind == STRUCTURAL, fabric.stretch * params.stiffness_scale,
+                    np.where(kind == SHEAR, fabric.shear, fabric.bending / (h * h)))
+
+
+def _assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, h) -> ClothModel:
+    a, b = springs[:, 0], springs[:, 1]
+    m_min = np.minimum(mass[a], mass[b])
+    dt_bound = float(EQ4_FACTOR * np.sqrt(np.min(m_min / k)))
+    ptr, other, sid = csr_adjacency(len(mass), springs)
+    return ClothModel(mass=mass, inv_mass=1.0 / mass, springs=springs, rest=rest, stiffness=k, kind=kind,
+                      adj_ptr=ptr, adj_other=other, adj_spring=sid, quads=quads, tris=tris,
+                      seams=seams, fabric=fabric, params=params, dt_bound=dt_bound, edge_length=h)
+
+
+def weld_model(model: ClothModel, vertex_map: np.ndarray) -> ClothModel:
+    """Merge vertices (sewn seam pairs): vertex_map (N,) -> new index. Springs keep their rest
+    lengths from the flat pattern; duplicates (a spring present on both panels) are dropped;
+    masses add up; seams are gone (they are now shared vertices)."""
+    n_new = int(vertex_map.max()) + 1
+    mass = np.zeros(n_new)
+    np.add.at(mass, vertex_map, model.mass)
+    s = vertex_map[model.springs]
+    keep = s[:, 0] != s[:, 1]
+    s, rest, k, kind = s[keep], model.rest[keep], model.stiffness[keep], model.kind[keep]
+    key = np.sort(s, axis=1)
+    _, first = np.unique(key, axis=0, return_index=True)
+    first = np.sort(first)
+    return _assemble(mass, s[first].astype(np.int32), rest[first], k[first], kind[first],
+                     vertex_map[model.quads].astype(np.int32), vertex_map[model.tris].astype(np.int32),
+                     np.zeros((0, 2), np.int32), model.fabric, model.params, model.edge_length)

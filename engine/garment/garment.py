@@ -1,0 +1,134 @@
+"""Pattern -> Garment: mesh every panel, match the stitched edges vertex for vertex, and put the
+panels in 3D (with a placement function; GarmentCode's own translation/rotation by default).
+
+A Garment is arrays only: positions, faces, rest (flat) coordinates, seam vertex pairs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from engine.errors import InputError
+from engine.garment.mesh import PanelMesh, mesh_panel
+from engine.pattern import geometry as geo
+from engine.pattern.spec import Panel, PatternSpec
+from engine.pattern.validate import check
+
+# place(panel_name, panel, uv (n, 2) metres in the panel frame) -> (n, 3) world positions
+Placement = Callable[[str, Panel, np.ndarray], np.ndarray]
+
+
+@dataclass
+class Garment:
+    """All panels of a pattern as one cloth mesh (not yet sewn).
+
+    positions: (N, 3) float64 initial world positions; uv: (N, 2) float64 flat rest positions in
+    each vertex's own panel frame (metres; rest lengths come from these); panel: (N,) int16
+    panel index; lattice: (N, 2) int32 grid indices (-1 off the grid) for flexion springs;
+    quads: (Q, 4) int32; tris: (T, 3) int32; seams: (P, 2) int32 vertex pairs to sew together;
+    seam_id: (P,) int32 which stitch of the spec each pair belongs to.
+    """
+
+    positions: np.ndarray
+    uv: np.ndarray
+    panel: np.ndarray
+    lattice: np.ndarray
+    quads: np.ndarray
+    tris: np.ndarray
+    seams: np.ndarray
+    seam_id: np.ndarray
+    panel_names: list[str]
+    stitch_names: list[str]
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def n_vertices(self) -> int:
+        return len(self.positions)
+
+    def triangles(self) -> np.ndarray:
+        """(F, 3) int32 all faces as triangles (quads split along 0-2)."""
+        q = self.quads
+        return np.concatenate([self.tris, q[:, [0, 1, 2]], q[:, [0, 2, 3]]]).astype(np.int32)
+
+
+def spec_placement(spec: PatternSpec, to_world: np.ndarray | None = None) -> Placement:
+    """Place panels with the spec's own translation/rotation (GarmentCode), then apply the body's
+    source-to-world transform so the spec stays on the body it was made for."""
+    m = np.eye(4) if to_world is None else np.asarray(to_world, dtype=np.float64)
+
+    def place(name: str, panel: Panel, uv: np.ndarray) -> np.ndarray:
+        p = geo.place_2d(uv, panel, spec.scale)
+        # the spec is in its own units; to_world maps the body file's units -> metres, so map
+        # metres back to file units first (a body file in cm has scale 0.01 in to_world)
+        s = np.cbrt(abs(np.linalg.det(m[:3, :3])))
+        p_file = p / s
+        return p_file @ m[:3, :3].T + m[:3, 3]
+
+    return place
+
+
+def build_garment(spec: PatternSpec, h: float = 0.015, place: Placement | None = None,
+                  source: str = "pattern") -> Garment:
+    """Mesh and place every panel; h is the target cloth edge length in metres."""
+    if not (0.002 <= h <= 0.2):
+        raise InputError(f"cloth edge length {h * 100:.2f} cm is out of range (0.2 .. 20 cm)")
+    problems = check(spec, source)
+    scale, rel = spec.scale, spec.properties.curvature_coords == "relative"
+    panels = spec.pattern.panels
+    names = list(spec.pattern.panel_order or panels.keys())
+    names += [n for n in panels if n not in names]
+    names = [n for n in names if n in panels]
+    place = place or spec_placement(spec)
+
+    # segments per edge: from its length, the same on both sides of a stitch
+    nseg = {(n, i): max(1, math.ceil(geo.edge_length(panels[n], e, scale, rel) / h))
+            for n in names for i, e in enumerate(panels[n].edges)}
+    for _ in range(3):  # edges sewn more than once: propagate the max to a fixed point
+        for a, b in spec.pattern.stitches:
+            k = max(nseg[(a.panel, a.edge)], nseg[(b.panel, b.edge)])
+            nseg[(a.panel, a.edge)] = nseg[(b.panel, b.edge)] = k
+
+    meshes: dict[str, PanelMesh] = {}
+    offset: dict[str, int] = {}
+    pos, uv, pid, lat, quads, tris = [], [], [], [], [], []
+    base = 0
+    for k, n in enumerate(names):
+        p = panels[n]
+        pts = [geo.edge_samples(p, e, scale, nseg[(n, i)], rel) for i, e in enumerate(p.edges)]
+        m = mesh_panel(pts, h, n)
+        meshes[n], offset[n] = m, base
+        pos.append(place(n, p, m.uv))
+        uv.append(m.uv)
+        pid.append(np.full(len(m.uv), k, dtype=np.int16))
+        lat.append(m.lattice)
+        quads.append(m.quads + base)
+        tris.append(m.tris + base)
+        base += len(m.uv)
+    positions = np.concatenate(pos)
+    if not np.all(np.isfinite(positions)):
+        raise InputError(f"{source}: panel placement produced non-finite positions")
+
+    seams, seam_id, stitch_names = [], [], []
+    for s, (a, b) in enumerate(spec.pattern.stitches):
+        va = meshes[a.panel].edge_vertices[a.edge] + offset[a.panel]
+        vb = meshes[b.panel].edge_vertices[b.edge] + offset[b.panel]
+        # GarmentCode sews edges head to tail; check against the 3D placement and take the
+        # pairing whose ends are closer (specs written either way then both work)
+        same = np.linalg.norm(positions[va[[0, -1]]] - positions[vb[[0, -1]]], axis=1).sum()
+        flip = np.linalg.norm(positions[va[[0, -1]]] - positions[vb[[-1, 0]]], axis=1).sum()
+        if flip <= same:
+            vb = vb[::-1]
+        seams.append(np.stack([va, vb], axis=1))
+        seam_id.append(np.full(len(va), s, dtype=np.int32))
+        stitch_names.append(f"{a.panel}[{a.edge}]-{b.panel}[{b.edge}]")
+    seams_arr = np.concatenate(seams).astype(np.int32) if seams else np.zeros((0, 2), np.int32)
+    seam_id_arr = np.concatenate(seam_id) if seam_id else np.zeros(0, np.int32)
+    return Garment(positions=positions, uv=np.concatenate(uv), panel=np.concatenate(pid),
+                   lattice=np.concatenate(lat), quads=np.concatenate(quads).astype(np.int32),
+                   tris=np.concatenate(tris).astype(np.int32), seams=seams_arr, seam_id=seam_id_arr,
+                   panel_names=names, stitch_names=stitch_names,
+                   warnings=[str(p) for p in problems])

@@ -1,0 +1,139 @@
+"""Mesh one flat panel: a regular grid clipped to the outline (seed 003 §3's rectangular
+topology), with vertices exactly on the outline.
+
+Inside, the mesh is the grid itself: quads of side `h` on a lattice aligned with the panel's
+x/y axes (the warp and weft of the fabric). Lattice points closer than `h/2` to the outline are
+dropped; the band between the outline samples and the remaining grid is filled with triangles
+(a constrained Delaunay triangulation, Shewchuk's Triangle). Each outline edge is sampled at
+uniform arc length with a caller-given number of segments, so two stitched edges can be given
+the same count and their vertices pair up one to one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import triangle as tr
+from matplotlib.path import Path as MplPath
+
+from engine.errors import InputError
+
+
+@dataclass
+class PanelMesh:
+    """A meshed panel, in the panel's own 2D frame (metres).
+
+    uv: (n, 2) float64 rest positions; quads: (Q, 4) int32 and tris: (T, 3) int32, wound so that
+    their normal is the outline's orientation normal (+z for a counter-clockwise outline);
+    edge_vertices[i]: (k_i + 1,) int32 vertex indices along outline edge i from its first to its
+    second endpoint; lattice: (n, 2) int32 grid (i, j) of interior vertices, -1 on the outline.
+    """
+
+    uv: np.ndarray
+    quads: np.ndarray
+    tris: np.ndarray
+    edge_vertices: list[np.ndarray]
+    lattice: np.ndarray
+    ccw: bool
+
+
+def _dist_to_polyline(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """(P,) distance of points to a closed polyline (M, 2)."""
+    a = poly
+    b = np.roll(poly, -1, axis=0)
+    ab = b - a
+    best = np.full(len(p), np.inf)
+    for start in range(0, len(a), 256):  # chunks keep memory at P x 256
+        aa, abb = a[start:start + 256], ab[start:start + 256]
+        ap = p[:, None, :] - aa[None]
+        t = np.clip((ap * abb[None]).sum(-1) / np.maximum((abb * abb).sum(-1), 1e-30)[None], 0.0, 1.0)
+        d = np.linalg.norm(ap - t[..., None] * abb[None], axis=-1)
+        best = np.minimum(best, d.min(axis=1))
+    return best
+
+
+def mesh_panel(edge_points: list[np.ndarray], h: float, name: str = "panel") -> PanelMesh:
+    """Mesh a panel whose outline is given as per-edge samples.
+
+    edge_points[i]: (k_i + 1, 2) samples of edge i from its start to its end (metres); the end of
+    edge i is the start of edge i + 1. h: target edge length (metres).
+    """
+    if h <= 0:
+        raise InputError(f"panel '{name}': mesh edge length must be positive, got {h}")
+    # outline vertices: each edge without its last sample (it is the next edge's first)
+    ring, edge_vertices, k = [], [], 0
+    for pts in edge_points:
+        n = len(pts) - 1
+        ring.append(pts[:-1])
+        edge_vertices.append(np.arange(k, k + n + 1, dtype=np.int32))
+        k += n
+    ring = np.concatenate(ring, axis=0)
+    nb = len(ring)
+    edge_vertices[-1][-1] = 0  # closes the loop
+    edge_vertices = [ev % nb for ev in edge_vertices]
+    area = 0.5 * float(np.dot(ring[:, 0], np.roll(ring[:, 1], -1)) - np.dot(np.roll(ring[:, 0], -1), ring[:, 1]))
+    if abs(area) < (h * h):
+        raise InputError(f"panel '{name}' is too small to mesh at {h * 100:.1f} cm ({abs(area) * 1e4:.2f} cm^2)")
+    ccw = area > 0
+
+    # interior lattice, aligned with the panel axes, away from the outline
+    lo, hi = ring.min(axis=0), ring.max(axis=0)
+    nx = int(np.floor((hi[0] - lo[0]) / h)) + 1
+    ny = int(np.floor((hi[1] - lo[1]) / h)) + 1
+    if nx * ny > 4_000_000:
+        raise InputError(f"panel '{name}': {nx * ny} grid points at {h * 100:.2f} cm; use a coarser resolution")
+    # centre the lattice in the bounding box so both sides get the same margin
+    x0 = lo[0] + 0.5 * ((hi[0] - lo[0]) - (nx - 1) * h)
+    y0 = lo[1] + 0.5 * ((hi[1] - lo[1]) - (ny - 1) * h)
+    ii, jj = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+    grid = np.stack([x0 + ii.ravel() * h, y0 + jj.ravel() * h], axis=1)
+    inside = MplPath(ring).contains_points(grid)
+    cand = np.flatnonzero(inside)
+    if len(cand):
+        far = _dist_to_polyline(grid[cand], ring) > 0.5 * h
+        cand = cand[far]
+    keep = np.zeros(nx * ny, dtype=bool)
+    keep[cand] = True
+    gid = np.full(nx * ny, -1, dtype=np.int64)
+    gid[cand] = nb + np.arange(len(cand))
+    uv = np.concatenate([ring, grid[cand]], axis=0)
+    lattice = np.full((len(uv), 2), -1, dtype=np.int32)
+    lattice[nb:, 0] = ii.ravel()[cand]
+    lattice[nb:, 1] = jj.ravel()[cand]
+
+    # quads: lattice cells with all four corners kept (CCW in the panel frame)
+    kg = keep.reshape(nx, ny)
+    cell = kg[:-1, :-1] & kg[1:, :-1] & kg[1:, 1:] & kg[:-1, 1:]
+    ci, cj = np.nonzero(cell)
+    g = gid.reshape(nx, ny)
+    quads = np.stack([g[ci, cj], g[ci + 1, cj], g[ci + 1, cj + 1], g[ci, cj + 1]], axis=1)
+
+    # band: constrained triangulation between the outline and the quad region's border
+    seg_outline = np.stack([np.arange(nb), (np.arange(nb) + 1) % nb], axis=1)
+    segments = [seg_outline]
+    holes = np.zeros((0, 2))
+    if len(quads):
+        qe = np.concatenate([quads[:, [0, 1]], quads[:, [1, 2]], quads[:, [2, 3]], quads[:, [3, 0]]])
+        key = np.sort(qe, axis=1)
+        uniq, count = np.unique(key, axis=0, return_counts=True)
+        segments.append(uniq[count == 1])
+        holes = uv[quads].mean(axis=1)
+    tri_in = {"vertices": uv, "segments": np.concatenate(segments).astype(np.int32)}
+    if len(holes):
+        tri_in["holes"] = holes
+    res = tr.triangulate(tri_in, "pQ")
+    tris = res.get("triangles", np.zeros((0, 3), dtype=np.int32)).astype(np.int32)
+    if len(res["vertices"]) != len(uv):
+        raise InputError(f"panel '{name}': outline could not be meshed without extra points "
+                         "(does it touch itself?); check the outline for near-crossing edges")
+    # drop triangles outside the outline (Triangle meshes the convex hull of a PSLG without 'c'
+    # only inside segments when holes/concavities are enclosed; be explicit)
+    if len(tris):
+        cen = uv[tris].mean(axis=1)
+        tris = tris[MplPath(ring).contains_points(cen)]
+    quads = quads.astype(np.int32)
+    if not ccw:  # a clockwise outline faces -z: wind faces the same way
+        quads = quads[:, ::-1].copy()
+        tris = tris[:, ::-1].copy()
+    return PanelMesh(uv=uv, quads=quads, tris=tris, edge_vertices=edge_vertices, lattice=lattice, ccw=ccw)

@@ -1,0 +1,113 @@
+"""2D geometry of pattern panels: edges as curves, sampled at uniform arc length (metres).
+
+All functions take a `Panel` of engine.pattern.spec and a `scale` (metres per pattern unit) and
+return NumPy arrays in metres in the panel's own 2D frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from engine.pattern.spec import Edge, Panel
+
+_DENSE = 256  # evaluation points per curved edge before arc-length resampling
+
+
+def _rel_to_abs(start: np.ndarray, end: np.ndarray, rel) -> np.ndarray:
+    """GarmentCode's edge-local coordinates (x along the edge, y along it turned +90 deg)."""
+    e = end - start
+    perp = np.array([-e[1], e[0]])
+    return start + rel[0] * e + rel[1] * perp
+
+
+def _circle_dense(start: np.ndarray, end: np.ndarray, radius: float, large_arc: bool, right: bool,
+                  n: int) -> np.ndarray:
+    chord = end - start
+    d = float(np.linalg.norm(chord))
+    r = max(radius, d / 2)  # a radius below half the chord cannot span it: treat as a half circle
+    h = np.sqrt(max(r * r - d * d / 4, 0.0))
+    sag = r + h if large_arc else r - h
+    left = np.array([-chord[1], chord[0]]) / d
+    bulge = -left if right else left
+    mid = (start + end) / 2 + sag * bulge
+    centre = mid - r * bulge
+    a0 = np.arctan2(*(start - centre)[::-1])
+    am = np.arctan2(*(mid - centre)[::-1])
+    a1 = np.arctan2(*(end - centre)[::-1])
+    # sweep from a0 to a1 passing through am
+    ccw = (a1 - a0) % (2 * np.pi)
+    through = (am - a0) % (2 * np.pi)
+    sweep = ccw if through <= ccw else ccw - 2 * np.pi
+    t = np.linspace(0.0, 1.0, n)
+    ang = a0 + sweep * t
+    pts = centre + r * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    pts[0], pts[-1] = start, end
+    return pts
+
+
+def edge_dense(panel: Panel, edge: Edge, scale: float, relative: bool = True, n: int = _DENSE) -> np.ndarray:
+    """(n, 2) points along the edge from its first to its second endpoint (not uniform)."""
+    v = np.asarray(panel.vertices, dtype=np.float64) * scale
+    s, e = v[edge.endpoints[0]], v[edge.endpoints[1]]
+    c = edge.curvature
+    if c is None:
+        return np.stack([s, e])
+    if c.type == "circle":
+        radius, large_arc, right = c.params
+        return _circle_dense(s, e, float(radius) * scale, bool(large_arc), bool(right), n)
+    ctrl = [(_rel_to_abs(s, e, p) if relative else np.asarray(p, dtype=np.float64) * scale) for p in c.params]
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    if c.type == "quadratic":
+        (c1,) = ctrl
+        return (1 - t) ** 2 * s + 2 * (1 - t) * t * c1 + t**2 * e
+    c1, c2 = ctrl
+    return (1 - t) ** 3 * s + 3 * (1 - t) ** 2 * t * c1 + 3 * (1 - t) * t**2 * c2 + t**3 * e
+
+
+def polyline_length(pts: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+
+
+def resample(pts: np.ndarray, n_segments: int) -> np.ndarray:
+    """(n_segments + 1, 2) points at uniform arc length along a polyline (ends kept exactly)."""
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    target = np.linspace(0.0, s[-1], n_segments + 1)
+    out = np.stack([np.interp(target, s, pts[:, 0]), np.interp(target, s, pts[:, 1])], axis=1)
+    out[0], out[-1] = pts[0], pts[-1]
+    return out
+
+
+def edge_length(panel: Panel, edge: Edge, scale: float, relative: bool = True) -> float:
+    return polyline_length(edge_dense(panel, edge, scale, relative))
+
+
+def edge_samples(panel: Panel, edge: Edge, scale: float, n_segments: int, relative: bool = True) -> np.ndarray:
+    """(n_segments + 1, 2) points at uniform arc length from endpoint 0 to endpoint 1."""
+    return resample(edge_dense(panel, edge, scale, relative), n_segments)
+
+
+def outline(panel: Panel, scale: float, relative: bool = True, n: int = 64) -> np.ndarray:
+    """(M, 2) closed outline (first point not repeated), edges in file order, densely sampled."""
+    parts = [edge_dense(panel, e, scale, relative, n)[:-1] for e in panel.edges]
+    return np.concatenate(parts, axis=0)
+
+
+def signed_area(poly: np.ndarray) -> float:
+    """Shoelace area: positive for a counter-clockwise polygon."""
+    x, y = poly[:, 0], poly[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+
+
+def panel_rotation_matrix(rotation_deg) -> np.ndarray:
+    """(3, 3) rotation from GarmentCode's Euler angles (degrees, intrinsic XYZ)."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_euler("XYZ", np.asarray(rotation_deg, dtype=np.float64), degrees=True).as_matrix()
+
+
+def place_2d(points: np.ndarray, panel: Panel, scale: float) -> np.ndarray:
+    """(K, 2) panel-frame points (metres) -> (K, 3) world points using the panel's own
+    translation/rotation (GarmentCode placement)."""
+    p3 = np.concatenate([points, np.zeros((len(points), 1))], axis=1)
+    return p3 @ panel_rotation_matrix(panel.rotation).T + np.asarray(panel.translation) * scale
