@@ -1,0 +1,342 @@
+"""Load a body scan (OBJ, PLY, STL, OFF, GLB/glTF) and normalise it to the world frame of
+DESIGN.md: metres, Y up, facing +Z, feet on y = 0, centred on x = z = 0 (bounding-box centre).
+
+Units come from a plausible human height; the up axis from the shape (standing human: the long
+axis; the end with the flat soles is down); the front from the feet (toes point forward) and the
+face. Messy scans are repaired (duplicate vertices merged, degenerate faces and tiny floating
+bits dropped) and every decision is written to Body.notes.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from engine.body.types import Body
+from engine.errors import InputError
+
+SUPPORTED = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0), "-z": (2, -1.0)}
+UNITS = ((1.0, "metres"), (0.1, "decimetres"), (0.01, "centimetres"), (0.001, "millimetres"))
+HUMAN_HEIGHT = (0.5, 2.5)  # m; the unit scales give non-overlapping raw ranges
+DEFAULT_MAX_TRIANGLES = 2_000_000
+TINY_PIECE = 0.01  # drop components under this fraction of the total surface area
+
+
+def load_body_file(path, up: str | None = None, front: str | None = None,
+                   max_triangles: int | None = None) -> Body:
+    """Read a mesh file and return a normalised Body (see module doc).
+
+    up / front: "+x" "-x" "+y" "-y" "+z" "-z" in the file's coordinates, overriding detection.
+    max_triangles: refuse bigger meshes; None -> env TRYON_MAX_TRIANGLES or 2,000,000.
+    Raises InputError (one line) for anything that cannot be used.
+    """
+    path = Path(path)
+    up_ax = _parse_axis(up, "--up")
+    front_ax = _parse_axis(front, "--front")
+    if up_ax and front_ax and up_ax[0] == front_ax[0]:
+        raise InputError(f"--up {up} and --front {front} are the same axis: give two perpendicular axes, e.g. --up +y --front +z")
+    cap = _triangle_cap(max_triangles)
+    vertices, faces = _read(path)
+    if len(faces) > cap:
+        raise InputError(f"{path.name}: {len(faces):,} triangles, more than the limit of {cap:,}: "
+                         "decimate the scan or raise TRYON_MAX_TRIANGLES")
+    notes: list[str] = []
+    vertices, faces = _clean(vertices, faces, path.name, notes)
+
+    # Axes: up = long axis of a standing human, its sign from the shape unless given.
+    if up_ax is None:
+        up_ax = _detect_up(vertices, faces, front_ax, notes)
+    extent = np.ptp(vertices[:, up_ax[0]])
+    scale, unit = _units(extent, path.name)
+    if front_ax is None:
+        front_ax = _detect_front(vertices, faces, up_ax, notes)
+    rot = _rotation(up_ax, front_ax)
+    world = (vertices @ rot.T) * scale
+    # Feet on y = 0, centred on x = z = 0 (bounding-box centre).
+    lo, hi = world.min(axis=0), world.max(axis=0)
+    shift = np.array([-(lo[0] + hi[0]) / 2, -lo[1], -(lo[2] + hi[2]) / 2])
+    world += shift
+    to_world = np.eye(4)
+    to_world[:3, :3] = scale * rot
+    to_world[:3, 3] = shift
+
+    faces = _orient(world, faces, notes)
+    notes.insert(0, f"units: {unit} (height {extent:.4g} in file units -> {world[:, 1].max():.3f} m)")
+    notes.insert(1, f"axes: up {_axis_name(up_ax)}, front {_axis_name(front_ax)} (file coordinates)")
+    _report_holes(world, faces, notes)
+    return Body(vertices=world, faces=faces.astype(np.int32), name=path.stem, notes=notes,
+                to_world=to_world)
+
+
+# --------------------------------------------------------------------------- input checks
+
+
+def _parse_axis(s: str | None, flag: str):
+    if s is None:
+        return None
+    key = s.strip().lower()
+    if key in ("x", "y", "z"):
+        key = "+" + key
+    if key not in AXES:
+        raise InputError(f"{flag} '{s}' is not an axis: use one of +x -x +y -y +z -z")
+    return AXES[key]
+
+
+def _axis_name(ax) -> str:
+    return ("+" if ax[1] > 0 else "-") + "xyz"[ax[0]]
+
+
+def _triangle_cap(max_triangles: int | None) -> int:
+    if max_triangles is not None:
+        return int(max_triangles)
+    env = os.environ.get("TRYON_MAX_TRIANGLES")
+    if env:
+        try:
+            return int(float(env))
+        except ValueError:
+            raise InputError(f"TRYON_MAX_TRIANGLES='{env}' is not a number: set it to a triangle count, e.g. 2000000") from None
+    return DEFAULT_MAX_TRIANGLES
+
+
+def _read(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) float64 vertices and (F, 3) int64 triangles of all meshes in the file, each with
+    its scene transform applied."""
+    ext = path.suffix.lower()
+    if ext not in SUPPORTED:
+        raise InputError(f"{path.name}: unsupported file type '{ext or 'none'}': give one of {' '.join(SUPPORTED)}")
+    if not path.is_file():
+        raise InputError(f"body file not found: {path}")
+    if path.stat().st_size == 0:
+        raise InputError(f"{path.name} is empty: give a mesh file with triangles")
+    import trimesh
+
+    try:
+        scene = trimesh.load_scene(str(path), file_type=ext[1:], process=False)
+        geoms = scene.dump(concatenate=False)
+    except Exception as e:  # trimesh raises anything on garbage; the user needs one line
+        msg = str(e).splitlines()[0][:120] if str(e) else type(e).__name__
+        raise InputError(f"{path.name} could not be read as {ext[1:].upper()} ({msg}): check that the file is a valid mesh") from None
+    verts, faces, offset, n_points = [], [], 0, 0
+    for g in geoms:
+        v = np.asarray(getattr(g, "vertices", np.zeros((0, 3))), dtype=np.float64).reshape(-1, 3)
+        f = np.asarray(getattr(g, "faces", np.zeros((0, 3))), dtype=np.int64)
+        if f.size == 0 or f.ndim != 2 or f.shape[1] != 3:
+            n_points += len(v)
+            continue
+        if f.min() < 0 or f.max() >= len(v):
+            raise InputError(f"{path.name}: faces refer to vertices that do not exist: the file is corrupt")
+        verts.append(v)
+        faces.append(f + offset)
+        offset += len(v)
+    if not faces:
+        if n_points:
+            raise InputError(f"{path.name} has only points ({n_points:,}), no faces: give a triangle mesh "
+                             "(mesh the point cloud first)")
+        raise InputError(f"{path.name} contains no triangles: check that it is a valid {ext[1:].upper()} mesh file")
+    return np.concatenate(verts), np.concatenate(faces)
+
+
+def _units(extent: float, name: str) -> tuple[float, str]:
+    for scale, unit in UNITS:
+        if HUMAN_HEIGHT[0] <= extent * scale <= HUMAN_HEIGHT[1]:
+            return scale, unit
+    raise InputError(f"{name} is not human-sized: {extent:.4g} units tall fits no unit (m, dm, cm, mm) "
+                     f"for a {HUMAN_HEIGHT[0]}-{HUMAN_HEIGHT[1]} m person: check the file or its scale")
+
+
+# --------------------------------------------------------------------------- repairs
+
+
+def _clean(v: np.ndarray, f: np.ndarray, name: str, notes: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Drop unused vertices, refuse non-finite ones, merge duplicates, drop degenerate faces and
+    tiny disconnected pieces. Keeps the vertex order of the file where nothing changes."""
+    v, f = _compact(v, f)
+    if not np.isfinite(v).all():
+        raise InputError(f"{name} has non-finite (NaN or infinite) vertex coordinates: repair or re-export the scan")
+    diag = float(np.linalg.norm(np.ptp(v, axis=0)))
+    if diag <= 0:
+        raise InputError(f"{name}: all vertices are at one point: give a real mesh")
+    # Merge duplicates: vertices closer than 1e-10 of the size (unit-independent; only true
+    # duplicates, e.g. STL corners or UV seams; near-coincident lips stay apart). A k-d tree
+    # pair search, not a rounding grid, so that scaled/rotated copies merge identically.
+    pairs = cKDTree(v).query_pairs(diag * 1e-10, output_type="ndarray")
+    if len(pairs):
+        n = len(v)
+        _, label = connected_components(
+            coo_matrix((np.ones(len(pairs), np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n)), directed=False)
+        first = np.full(label.max() + 1, n)
+        np.minimum.at(first, label, np.arange(n))  # each group keeps its first vertex
+        keep = first[label] == np.arange(n)
+        new_index = np.cumsum(keep) - 1
+        notes.append(f"merged {n - int(keep.sum()):,} duplicate vertices")
+        f = new_index[first[label]][f]
+        v = v[keep]
+    # Degenerate faces: repeated corners or (near) zero area.
+    area = _areas(v, f)
+    bad = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2]) | (area <= 1e-14 * diag * diag)
+    if bad.any():
+        notes.append(f"removed {int(bad.sum()):,} degenerate faces")
+        f, area = f[~bad], area[~bad]
+    if len(f) == 0:
+        raise InputError(f"{name}: every face is degenerate (zero area): give a real mesh")
+    # Tiny disconnected bits (floating scan noise); a body in several real pieces is kept.
+    ncomp, label = _components(len(v), f)
+    if ncomp > 1:
+        comp_area = np.bincount(label[f[:, 0]], area, ncomp)
+        tiny = comp_area < TINY_PIECE * comp_area.sum()
+        if tiny.any():
+            keep = ~tiny[label[f[:, 0]]]
+            pct = 100.0 * comp_area[tiny].sum() / comp_area.sum()
+            notes.append(f"dropped {int(tiny.sum())} small disconnected piece(s) ({pct:.2g} % of the surface)")
+            f = f[keep]
+        kept = int((~tiny).sum())
+        if kept > 1:
+            notes.append(f"the body is in {kept} separate pieces (kept all)")
+    return _compact(v, f)
+
+
+def _compact(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    used = np.zeros(len(v), bool)
+    used[f.reshape(-1)] = True
+    if used.all():
+        return v, f
+    new = np.cumsum(used) - 1
+    return v[used], new[f]
+
+
+def _areas(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    t = v[f]
+    return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+
+
+def _components(n: int, f: np.ndarray) -> tuple[int, np.ndarray]:
+    rows = np.concatenate([f[:, 0], f[:, 1]])
+    cols = np.concatenate([f[:, 1], f[:, 2]])
+    g = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(n, n))
+    return connected_components(g, directed=False)
+
+
+def _orient(v: np.ndarray, f: np.ndarray, notes: list[str]) -> np.ndarray:
+    """Flip the winding if the normals point inwards (negative enclosed volume)."""
+    t = v[f]
+    vol = np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0
+    if vol < 0:
+        notes.append("flipped the face winding (normals pointed inwards)")
+        return f[:, ::-1].copy()
+    return f
+
+
+def _report_holes(v: np.ndarray, f: np.ndarray, notes: list[str]) -> None:
+    """Count boundary loops (edges used by one face) and the largest one's length."""
+    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    ue, cnt = np.unique(e, axis=0, return_counts=True)
+    b = ue[cnt == 1]
+    if len(b) == 0:
+        return
+    ncomp, label = connected_components(
+        coo_matrix((np.ones(len(b), np.int8), (b[:, 0], b[:, 1])), shape=(len(v), len(v))), directed=False)
+    length = np.linalg.norm(v[b[:, 0]] - v[b[:, 1]], axis=1)
+    loop_len = np.bincount(label[b[:, 0]], length, ncomp)
+    loops = loop_len[loop_len > 0]
+    notes.append(f"{len(loops)} hole(s) in the surface, largest {loops.max() * 100:.1f} cm around "
+                 "(measurements across a hole are approximate)")
+
+
+# --------------------------------------------------------------------------- axes
+
+
+def _area_stats(v: np.ndarray, f: np.ndarray):
+    c = v[f].mean(axis=1)
+    a = _areas(v, f)
+    return c, a / a.sum()
+
+
+def _detect_up(v: np.ndarray, f: np.ndarray, front_ax, notes: list[str]):
+    """Up axis: the axis along which the surface is spread most (area-weighted std; a standing
+    body's height beats even a T-pose arm span, whose area is mostly near the middle). Sign:
+    the end with the flat soles (most area within 4 % of the end) is down; if both ends look
+    alike, the end whose cut is in two pieces (legs) rather than one (head)."""
+    c, w = _area_stats(v, f)
+    mean = (c * w[:, None]).sum(axis=0)
+    std = np.sqrt(((c - mean) ** 2 * w[:, None]).sum(axis=0))
+    order = np.argsort(std)[::-1]
+    axis = int(order[0]) if front_ax is None or order[0] != front_ax[0] else int(order[1])
+    if std[order[1]] > 0.8 * std[axis] and (front_ax is None or order[1] != front_ax[0]):
+        notes.append(f"up axis {'xyz'[axis]} guessed with low confidence (body about as wide as tall); "
+                     "pass --up if the result looks wrong")
+    x = c[:, axis]
+    lo, hi = x.min(), x.max()
+    band = 0.04 * (hi - lo)
+    a_lo, a_hi = w[x < lo + band].sum(), w[x > hi - band].sum()
+    ratio = (a_lo + 1e-12) / (a_hi + 1e-12)
+    if ratio > 1.5:
+        return (axis, 1.0)
+    if ratio < 1 / 1.5:
+        return (axis, -1.0)
+    # Weak: count pieces of cuts at 15 % from each end (legs: two, head/neck: one).
+    from engine.body.measure import slice_pieces
+
+    perm = [i for i in range(3) if i != axis]
+    vv = v[:, [perm[0], axis, perm[1]]]
+    n_lo = len([p for p in slice_pieces(vv, f, lo + 0.15 * (hi - lo)) if p.length > 0.02 * (hi - lo)])
+    n_hi = len([p for p in slice_pieces(vv, f, hi - 0.15 * (hi - lo)) if p.length > 0.02 * (hi - lo)])
+    sign = 1.0 if n_lo >= n_hi else -1.0
+    if n_lo == n_hi:
+        sign = 1.0 if ratio >= 1 else -1.0
+    notes.append(f"up direction {'+' if sign > 0 else '-'}{'xyz'[axis]} guessed with low confidence; "
+                 "pass --up if the result looks wrong")
+    return (axis, sign)
+
+
+def _detect_front(v: np.ndarray, f: np.ndarray, up_ax, notes: list[str]):
+    """Front: the depth axis is the horizontal axis with the smaller area-weighted spread; its
+    sign from the feet (toes reach further forward of the shins than the heels reach back) and,
+    when the feet say little, from the face (nose and chin stick out in front of the neck)."""
+    c, w = _area_stats(v, f)
+    up, s = up_ax
+    h = c[:, up] * s
+    lo, hi = h.min(), h.max()
+    height = hi - lo
+    horiz = [i for i in range(3) if i != up]
+    mean = (c * w[:, None]).sum(axis=0)
+    std = np.sqrt(((c - mean) ** 2 * w[:, None]).sum(axis=0))
+    depth = horiz[int(np.argmin(std[horiz]))]
+    d = c[:, depth]
+    conf_axis = std[horiz].max() > 1.25 * std[horiz].min()
+
+    def span(sel):
+        return (d[sel].min(), d[sel].max()) if sel.any() else (np.nan, np.nan)
+
+    # Feet: forward reach of the soles beyond the shin cut, minus the backward reach (heel).
+    foot = h < lo + 0.03 * height
+    shin = (h > lo + 0.08 * height) & (h < lo + 0.12 * height)
+    (f0, f1), (s0, s1) = span(foot), span(shin)
+    feet_cue = ((f1 - s1) - (s0 - f0)) / height if np.isfinite([f0, s0]).all() else 0.0
+    # Face: the head (top 6-12 %) reaches further forward of the neck than back.
+    head = (h > hi - 0.12 * height) & (h < hi - 0.06 * height)
+    neck = (h > hi - 0.16 * height) & (h < hi - 0.13 * height)
+    (h0, h1), (n0, n1) = span(head), span(neck)
+    face_cue = ((h1 - n1) - (n0 - h0)) / height if np.isfinite([h0, n0]).all() else 0.0
+    cue = feet_cue if abs(feet_cue) > 0.03 else feet_cue + face_cue
+    sign = 1.0 if cue >= 0 else -1.0
+    if abs(cue) < 0.02 or not conf_axis:
+        notes.append(f"front {'+' if sign > 0 else '-'}{'xyz'[depth]} guessed with low confidence "
+                     "(no clear feet or face cue); pass --front if the result looks wrong")
+    return (depth, sign)
+
+
+def _rotation(up_ax, front_ax) -> np.ndarray:
+    """Proper rotation (rows: world x, y, z in file coordinates) taking up -> +Y, front -> +Z."""
+    if up_ax[0] == front_ax[0]:
+        raise InputError("up and front are the same axis: pass perpendicular --up and --front")
+    u = np.zeros(3)
+    u[up_ax[0]] = up_ax[1]
+    fr = np.zeros(3)
+    fr[front_ax[0]] = front_ax[1]
+    return np.array([np.cross(u, fr), u, fr])

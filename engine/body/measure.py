@@ -1,0 +1,474 @@
+"""Body measurements from geometry alone: horizontal slices of the mesh, cut into pieces.
+
+Works on any normalised Body (world frame of DESIGN.md: metres, Y up, facing +Z, feet on
+y = 0). Scans have no segments or rig, so nothing here needs them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import ConvexHull, QhullError
+
+
+# --------------------------------------------------------------------------- slicing
+
+
+@dataclass
+class Piece:
+    """One connected curve of a horizontal cut: a loop around a limb or the torso.
+
+    points: (K, 2) float64 (x, z) of the cut points, unordered; length: length of the cut curve
+    (what a tape pressed into every concavity would read); centroid: (2,) length-weighted centre
+    of the curve; closed: every point has two neighbours (no hole crossed the cut).
+    """
+
+    points: np.ndarray
+    length: float
+    centroid: np.ndarray
+    closed: bool
+    _hull: float | None = field(default=None, repr=False)
+
+    @property
+    def xmin(self) -> float:
+        return float(self.points[:, 0].min())
+
+    @property
+    def xmax(self) -> float:
+        return float(self.points[:, 0].max())
+
+    @property
+    def hull_perimeter(self) -> float:
+        """Perimeter of the convex hull: a tape measure spans concavities (between the breasts)."""
+        if self._hull is None:
+            self._hull = hull_perimeter(self.points)
+        return self._hull
+
+
+def hull_perimeter(points: np.ndarray) -> float:
+    """Perimeter of the 2D convex hull of (K, 2) points (0 for fewer than 3 / collinear)."""
+    if len(points) < 3:
+        return 0.0
+    try:
+        return float(ConvexHull(points).area)  # in 2D qhull's "area" is the perimeter
+    except QhullError:
+        return 0.0
+
+
+def slice_pieces(vertices: np.ndarray, faces: np.ndarray, y: float,
+                 face_y: np.ndarray | None = None) -> list[Piece]:
+    """Cut the mesh with the plane at height y and split the cut into connected pieces.
+
+    Vectorised over all triangles. A vertex exactly on the plane counts as below it, which is
+    the same as moving the plane up by an infinitesimal amount: no special cases.
+    face_y: (F, 3) y of each face corner, precomputed when slicing many times.
+    """
+    if face_y is None:
+        face_y = vertices[:, 1][faces]
+    above = face_y > y
+    n_above = above.sum(axis=1)
+    sel = (n_above == 1) | (n_above == 2)
+    if not sel.any():
+        return []
+    f = faces[sel].astype(np.int64)
+    a = above[sel]
+    # Edge k runs from corner k to corner k+1; exactly two of the three edges cross.
+    crosses = a != np.roll(a, -1, axis=1)
+    skip = np.argmin(crosses, axis=1)
+    rows = np.arange(len(f))
+    n = len(vertices)
+
+    def edge_key(e):
+        i, j = f[rows, e], f[rows, (e + 1) % 3]
+        return np.minimum(i, j) * n + np.maximum(i, j)
+
+    keys = np.concatenate([edge_key((skip + 1) % 3), edge_key((skip + 2) % 3)])
+    # Each crossed mesh edge is one cut point, shared by the two triangles on either side.
+    ukey, inv = np.unique(keys, return_inverse=True)
+    p0, p1 = vertices[ukey // n], vertices[ukey % n]
+    t = (y - p0[:, 1]) / (p1[:, 1] - p0[:, 1])
+    pts = (p0 + t[:, None] * (p1 - p0))[:, [0, 2]]
+    m = len(f)
+    s1, s2 = inv[:m], inv[m:]
+    npts = len(ukey)
+    graph = coo_matrix((np.ones(m, np.int8), (s1, s2)), shape=(npts, npts))
+    ncomp, label = connected_components(graph, directed=False)
+    seg_len = np.linalg.norm(pts[s1] - pts[s2], axis=1)
+    seg_mid = 0.5 * (pts[s1] + pts[s2])
+    seg_lab = label[s1]
+    comp_len = np.bincount(seg_lab, seg_len, ncomp)
+    w = np.maximum(comp_len, 1e-30)
+    cx = np.bincount(seg_lab, seg_len * seg_mid[:, 0], ncomp) / w
+    cz = np.bincount(seg_lab, seg_len * seg_mid[:, 1], ncomp) / w
+    degree = np.bincount(s1, minlength=npts) + np.bincount(s2, minlength=npts)
+    n_open = np.bincount(label, degree != 2, ncomp)
+    order = np.argsort(label, kind="stable")
+    bounds = np.searchsorted(label[order], np.arange(ncomp + 1))
+    return [Piece(points=pts[order[bounds[c]:bounds[c + 1]]], length=float(comp_len[c]),
+                  centroid=np.array([cx[c], cz[c]]), closed=bool(n_open[c] == 0))
+            for c in range(ncomp)]
+
+
+def slice_stack(vertices: np.ndarray, faces: np.ndarray, ys: np.ndarray) -> list[list[Piece]]:
+    """slice_pieces at many heights; each triangle is handed only to the cuts it spans, so the
+    cost grows with the number of crossings, not with heights x triangles."""
+    ys = np.asarray(ys, dtype=np.float64)
+    face_y = vertices[:, 1][faces]
+    lo, hi = face_y.min(axis=1), face_y.max(axis=1)
+    # Cut k crosses a face when lo <= ys[k] < hi (vertex on the plane counts as below).
+    first = np.searchsorted(ys, lo, side="left")
+    last = np.searchsorted(ys, hi, side="left")  # exclusive
+    count = np.maximum(last - first, 0)
+    face_idx = np.repeat(np.arange(len(faces)), count)
+    offs = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    cut_idx = np.repeat(first, count) + offs
+    order = np.argsort(cut_idx, kind="stable")
+    face_idx, cut_idx = face_idx[order], cut_idx[order]
+    bounds = np.searchsorted(cut_idx, np.arange(len(ys) + 1))
+    out = []
+    for k, y in enumerate(ys):
+        fi = face_idx[bounds[k]:bounds[k + 1]]
+        out.append(slice_pieces(vertices, faces[fi], float(y), face_y[fi]) if len(fi) else [])
+    return out
+
+
+# --------------------------------------------------------------------------- measurements
+
+# Order of the report, with labels; every value is a length in metres internally.
+FIELDS = (
+    ("height", "Height"),
+    ("bust", "Bust (chest) circumference"),
+    ("underbust", "Underbust circumference"),
+    ("waist", "Waist circumference"),
+    ("hips", "Hip circumference"),
+    ("shoulder_width", "Shoulder width"),
+    ("arm_length", "Arm length"),
+    ("inseam", "Inseam"),
+    ("shoulder_height", "Shoulder height"),
+    ("bust_height", "Bust height"),
+    ("waist_height", "Waist height"),
+    ("hip_height", "Hip height"),
+    ("crotch_height", "Crotch height"),
+    ("knee_height", "Knee height"),
+)
+
+
+@dataclass
+class Measurements:
+    """Body measurements in metres (NaN where the geometry did not allow one).
+
+    Definitions (all from the mesh alone; circumferences are horizontal and are the perimeter
+    of the convex hull of the torso's cut, i.e. a tape that spans concavities):
+      height          top of the head minus the floor (lowest point).
+      bust            largest torso circumference between the underbust and just below the
+                      armpits (the chest region); for a flat chest this is the chest girth.
+      underbust       torso circumference where the steep fall of the girth below the bust ends
+                      (the knee of the girth profile between the bust point and the waist).
+      waist           smallest torso circumference between the hips and the bust point
+                      (the natural waist).
+      hips            largest circumference between the crotch and the waist, both legs
+                      together just below the crotch.
+      shoulder_width  straight distance, left to right, between the acromion points, taken
+                      (heuristically) above the side walls of the torso just below the armpits.
+      arm_length      acromion to wrist (narrowest arm cut above the hand), along the arm (via
+                      the elbow).
+      inseam          crotch to floor (crotch_height).
+      *_height        height above the floor of: the acromion (shoulder), the most forward point of
+                      the bust (bust), the waist, hip and knee cuts, the crotch (highest point where
+                      the legs separate).
+    """
+
+    height: float = float("nan")
+    bust: float = float("nan")
+    underbust: float = float("nan")
+    waist: float = float("nan")
+    hips: float = float("nan")
+    shoulder_width: float = float("nan")
+    arm_length: float = float("nan")
+    inseam: float = float("nan")
+    shoulder_height: float = float("nan")
+    bust_height: float = float("nan")
+    waist_height: float = float("nan")
+    hip_height: float = float("nan")
+    crotch_height: float = float("nan")
+    knee_height: float = float("nan")
+    notes: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        """Centimetres rounded to 0.1 (None where not measurable), plus "units": "cm"."""
+        out: dict = {}
+        for key, _ in FIELDS:
+            val = getattr(self, key)
+            out[key] = None if not np.isfinite(val) else round(float(val) * 100.0, 1)
+        out["units"] = "cm"
+        if self.notes:
+            out["notes"] = list(self.notes)
+        return out
+
+    def to_text(self) -> str:
+        d = self.to_dict()
+        width = max(len(label) for _, label in FIELDS)
+        lines = [f"{'Measurement':<{width}}  {'cm':>7}", "-" * (width + 9)]
+        for key, label in FIELDS:
+            val = d[key]
+            lines.append(f"{label:<{width}}  {'n/a' if val is None else f'{val:7.1f}':>7}")
+        lines += [f"note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+
+STEP = 0.005  # m between profile cuts; landmarks are then refined by bisection
+
+
+class _Profile:
+    """Horizontal cuts of the body every STEP metres, with the torso piece picked per cut."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, axis_x: float):
+        self.v, self.f, self.ax = vertices, faces, axis_x
+        self.ys = np.arange(STEP, vertices[:, 1].max(), STEP)
+        self.cuts = slice_stack(vertices, faces, self.ys)
+        self.central = [self.central_piece(p) for p in self.cuts]
+
+    def central_piece(self, pieces: list[Piece]) -> Piece | None:
+        """The piece around the body axis: the longest whose x-range spans the axis (an inner
+        cavity such as the mouth is spanned too but is shorter than the head around it)."""
+        spans = [p for p in pieces if p.xmin <= self.ax <= p.xmax]
+        return max(spans, key=lambda p: p.length) if spans else None
+
+    def cut(self, y: float) -> list[Piece]:
+        return slice_pieces(self.v, self.f, y)
+
+    def index_range(self, y0: float, y1: float) -> np.ndarray:
+        return np.nonzero((self.ys >= y0) & (self.ys <= y1))[0]
+
+    def girth(self, i: int) -> float:
+        p = self.central[i]
+        return p.hull_perimeter if p is not None else float("nan")
+
+
+def _bisect(pred, y_true: float, y_false: float, tol: float = 5e-4) -> float:
+    """Boundary between a height where pred holds and one where it does not."""
+    for _ in range(40):
+        if abs(y_true - y_false) <= tol:
+            break
+        mid = 0.5 * (y_true + y_false)
+        if pred(mid):
+            y_true = mid
+        else:
+            y_false = mid
+    return 0.5 * (y_true + y_false)
+
+
+def _weighted_median(x: np.ndarray, w: np.ndarray) -> float:
+    order = np.argsort(x)
+    cw = np.cumsum(w[order])
+    return float(x[order][np.searchsorted(cw, 0.5 * cw[-1])])
+
+
+def measure(body) -> Measurements:
+    """Measure a normalised Body (see Measurements for the definitions used)."""
+    v = np.asarray(body.vertices, dtype=np.float64)
+    f = np.asarray(body.faces, dtype=np.int64)
+    m = Measurements()
+    y0 = float(v[:, 1].min())
+    if y0 != 0.0:  # measure from the floor even if a caller hands an unnormalised body
+        v = v - np.array([0.0, y0, 0.0])
+    h = float(v[:, 1].max())
+    m.height = h
+    tri = v[f]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    # Body axis: area-weighted median x, robust to one arm held out.
+    ax = _weighted_median(tri[:, :, 0].mean(axis=1), area)
+    prof = _Profile(v, f, ax)
+
+    crotch = _find_crotch(prof, h, m)
+    if not np.isfinite(crotch):
+        return m
+    m.crotch_height = m.inseam = crotch
+
+    armpit = _find_armpit(prof, h, crotch, m)
+    if not np.isfinite(armpit):
+        return m
+
+    _torso_girths(prof, h, crotch, armpit, m)
+    _knee(prof, h, crotch, m)
+    acromion = _shoulders(v, prof, h, armpit, m)
+    if acromion is not None:
+        _arms(prof, h, armpit, acromion, m)
+    return m
+
+
+def _find_crotch(prof: _Profile, h: float, m: Measurements) -> float:
+    """Highest height where no piece spans the body axis (the legs have separated)."""
+    idx = prof.index_range(0.3 * h, 0.65 * h)
+    has_central = np.array([prof.central[i] is not None for i in idx])
+    if len(idx) == 0 or has_central.all() or not has_central.any():
+        m.notes.append("could not find the crotch (legs not separated?): lower-body measures skipped")
+        return float("nan")
+    # Scan down from the top of the window: the first cut without a central piece.
+    top_true = np.nonzero(has_central)[0].max()
+    below = [k for k in range(top_true, -1, -1) if not has_central[k]]
+    if not below:
+        m.notes.append("could not find the crotch: lower-body measures skipped")
+        return float("nan")
+    k = below[0]
+    y_false = prof.ys[idx[k]]
+    y_true = prof.ys[idx[k + 1]]
+    return _bisect(lambda y: prof.central_piece(prof.cut(y)) is not None, y_true, y_false)
+
+
+def _find_armpit(prof: _Profile, h: float, crotch: float, m: Measurements) -> float:
+    """Highest height (below the shoulders) where the central piece narrows sharply going
+    down: the arms separate from the torso there (or, in a T-pose, the arms end)."""
+    idx = prof.index_range(crotch + 0.1 * h, 0.9 * h)
+    width = np.array([(p.xmax - p.xmin) if (p := prof.central[i]) is not None else np.nan for i in idx])
+    drop = width[:-1] < 0.8 * width[1:]  # cut k much narrower than cut k+1 above it
+    ks = np.nonzero(drop)[0]
+    if len(ks) == 0:
+        m.notes.append("could not find the armpits: upper-body measures skipped")
+        return float("nan")
+    k = ks.max()
+    w_lo, w_hi = width[k], width[k + 1]
+    thresh = 0.5 * (w_lo + w_hi)
+
+    def narrow(y):
+        p = prof.central_piece(prof.cut(y))
+        return p is not None and (p.xmax - p.xmin) < thresh
+
+    return _bisect(narrow, prof.ys[idx[k]], prof.ys[idx[k + 1]])
+
+
+def _torso_girths(prof: _Profile, h: float, crotch: float, armpit: float, m: Measurements) -> None:
+    # Bust point: the most forward point of the torso in the chest region.
+    idx = prof.index_range(armpit - 0.12 * h, armpit - 0.01 * h)
+    front = np.array([prof.central[i].points[:, 1].max() if prof.central[i] is not None else -np.inf
+                      for i in idx])
+    i_apex = idx[int(np.argmax(front))]
+    m.bust_height = float(prof.ys[i_apex])
+
+    # Waist: narrowest torso girth between the hips and the bust point.
+    idx = prof.index_range(crotch + 0.1 * h, m.bust_height)
+    g = np.array([prof.girth(i) for i in idx])
+    iw = idx[int(np.nanargmin(g))]
+    m.waist, m.waist_height = prof.girth(iw), float(prof.ys[iw])
+
+    # Underbust: where the steep fall of the girth below the bust ends (knee of the profile:
+    # the point farthest below the chord from the waist to the bust point).
+    idx = np.arange(iw, i_apex + 1)
+    if len(idx) >= 3:
+        g = np.array([prof.girth(i) for i in idx])
+        chord = g[0] + (g[-1] - g[0]) * (prof.ys[idx] - prof.ys[idx[0]]) / (prof.ys[idx[-1]] - prof.ys[idx[0]])
+        iu = idx[int(np.nanargmax(chord - g))]
+        m.underbust = prof.girth(iu)
+        # Bust: largest girth from the underbust to just below the armpits.
+        idx = prof.index_range(prof.ys[iu], armpit - 0.01 * h)
+        g = np.array([prof.girth(i) for i in idx])
+        m.bust = float(np.nanmax(g))
+
+    # Hips: largest girth between the crotch and the waist; a little below the crotch the
+    # tape goes around both legs (hull of the two leg pieces).
+    best, best_y = -np.inf, np.nan
+    for i in prof.index_range(crotch - 0.03 * h, m.waist_height):
+        if prof.ys[i] >= crotch:
+            g = prof.girth(i)
+        else:
+            legs = _leg_pair(prof, prof.cuts[i])
+            g = hull_perimeter(np.vstack([p.points for p in legs])) if legs else np.nan
+        if np.isfinite(g) and g > best:
+            best, best_y = g, float(prof.ys[i])
+    if np.isfinite(best):
+        m.hips, m.hip_height = best, best_y
+
+
+def _leg_pair(prof: _Profile, pieces: list[Piece]) -> list[Piece] | None:
+    """The two legs: the longest piece left of the axis and the longest right of it."""
+    left = [p for p in pieces if p.xmax < prof.ax]
+    right = [p for p in pieces if p.xmin > prof.ax]
+    if not left or not right:
+        return None
+    return [max(left, key=lambda p: p.length), max(right, key=lambda p: p.length)]
+
+
+def _knee(prof: _Profile, h: float, crotch: float, m: Measurements) -> None:
+    """Knee: the narrowest leg girth between the calf bulge and mid-thigh; fallback a standard
+    proportion (0.285 of the height)."""
+    idx = prof.index_range(0.12 * h, crotch - 0.05 * h)
+    girth = []
+    for i in idx:
+        legs = _leg_pair(prof, prof.cuts[i])
+        girth.append(np.mean([p.hull_perimeter for p in legs]) if legs else np.nan)
+    girth = np.array(girth)
+    calf_win = (prof.ys[idx] >= 0.15 * h) & (prof.ys[idx] <= 0.25 * h)
+    if np.isfinite(girth).sum() < 5 or not np.isfinite(girth[calf_win]).any():
+        m.knee_height = 0.285 * h
+        m.notes.append("knee height from the standard proportion 0.285 x height")
+        return
+    i_calf = np.nonzero(calf_win)[0][int(np.nanargmax(np.where(calf_win, girth, -np.inf)[calf_win]))]
+    sub = girth[i_calf:]
+    m.knee_height = float(prof.ys[idx[i_calf + int(np.nanargmin(sub))]])
+
+
+def _shoulders(v: np.ndarray, prof: _Profile, h: float, armpit: float, m: Measurements):
+    """Acromion points, a heuristic: laterally at the side walls of the torso just below the
+    armpits (the torso wall runs up to the acromion; the bend of the shoulder-arm top profile
+    sits on the deltoid, a few cm further out), vertically the top of the body there."""
+    core = prof.central_piece(prof.cut(armpit - 0.005))
+    if core is None:
+        return None
+    points = []
+    for x in (core.xmin, core.xmax):
+        sel = (np.abs(v[:, 0] - x) < 0.005) & (v[:, 1] >= armpit)
+        if not sel.any():
+            return None
+        top = np.nonzero(sel)[0][int(np.argmax(v[sel, 1]))]
+        points.append(np.array([x, v[top, 1], v[top, 2]]))
+    left, right = points
+    m.shoulder_width = float(right[0] - left[0])
+    m.shoulder_height = float(0.5 * (left[1] + right[1]))
+    return left, right
+
+
+def _arms(prof: _Profile, h: float, armpit: float, acromion, m: Measurements) -> None:
+    """Arm length: acromion -> elbow -> wrist, through the centres of the arm cuts. The wrist
+    is the narrowest arm cut in the lower half of the arm, above the hand."""
+    lengths = []
+    for side, a in zip((-1.0, 1.0), acromion):
+        ys, cents, widths = [], [], []
+        for i in prof.index_range(0.0, armpit - 0.005)[::-1]:  # from the armpit downwards
+            pieces, core = prof.cuts[i], prof.central[i]
+            if core is not None:
+                inner = core.xmax if side > 0 else core.xmin
+            else:
+                legs = _leg_pair(prof, pieces)
+                if legs is None:
+                    break
+                inner = legs[1].xmax if side > 0 else legs[0].xmin
+            arm = [p for p in pieces if side * ((p.xmin if side > 0 else p.xmax) - inner) > 0]
+            if not arm:
+                if ys:
+                    break
+                continue
+            w = np.array([p.length for p in arm])
+            c = (np.array([p.centroid for p in arm]) * w[:, None]).sum(axis=0) / w.sum()
+            ys.append(prof.ys[i])
+            cents.append([c[0], prof.ys[i], c[1]])
+            widths.append(hull_perimeter(np.vstack([p.points for p in arm])))
+        if len(ys) < 8:
+            continue
+        cents, widths = np.array(cents), np.array(widths)
+        n = len(ys)
+        lo, hi = int(0.45 * n), int(0.9 * n)
+        iw = lo + int(np.argmin(widths[lo:hi]))
+        wrist = cents[iw]
+        # Elbow: the arm centre farthest from the straight acromion-wrist line (0 if straight).
+        aw = wrist - a
+        t = np.clip(((cents[:iw + 1] - a) @ aw) / max(aw @ aw, 1e-12), 0, 1)
+        dist = np.linalg.norm(cents[:iw + 1] - (a + t[:, None] * aw), axis=1)
+        elbow = cents[int(np.argmax(dist))]
+        lengths.append(np.linalg.norm(elbow - a) + np.linalg.norm(wrist - elbow))
+    if lengths:
+        m.arm_length = float(np.mean(lengths))
+    else:
+        m.notes.append("arm length not measured: no hanging arm found below the armpits (T-pose?)")

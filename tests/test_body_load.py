@@ -1,0 +1,186 @@
+"""Loading and normalising body scans: units, axes, repairs, refusals."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from engine.body.load import load_body_file
+from engine.errors import InputError
+
+SAMPLE = Path("/work/shared/samples/garmentcode/mean_female.obj")
+
+
+@pytest.fixture(scope="module")
+def source():
+    m = trimesh.load(SAMPLE, process=False)
+    return np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64)
+
+
+@pytest.fixture(scope="module")
+def body():
+    return load_body_file(SAMPLE)
+
+
+def write(path: Path, v, f) -> Path:
+    trimesh.Trimesh(v, f, process=False).export(path)
+    return path
+
+
+def test_sample_in_world_frame(body, source):
+    v = body.vertices
+    assert v.dtype == np.float64 and body.faces.dtype == np.int32
+    assert abs(body.height - 1.662) < 0.005
+    assert abs(v[:, 1].min()) < 1e-12
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    assert abs(lo[0] + hi[0]) < 1e-9 and abs(lo[2] + hi[2]) < 1e-9
+    # Facing +Z: the toes are the most forward part of the feet.
+    feet = v[v[:, 1] < 0.05]
+    assert feet[:, 2].max() > 0.1 and feet[:, 2].min() > -0.11
+    # The file is already in the world frame: only a few-mm centring shift.
+    assert np.allclose(body.to_world[:3, :3], np.eye(3))
+    assert np.abs(body.to_world[:3, 3]).max() < 0.005
+    src_h = np.c_[source[0], np.ones(len(source[0]))]
+    assert np.abs((src_h @ body.to_world.T)[:, :3] - v).max() < 1e-9
+    assert any("metres" in n for n in body.notes)
+    assert not any("low confidence" in n for n in body.notes)
+
+
+# Rotations taking world coordinates to file coordinates.
+ZUP = np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], float)       # y -> z (Z up, faces -Y)
+FACE_X = np.array([[0, 0, 1], [0, 1, 0], [-1, 0, 0]], float)    # faces +X
+FACE_MX = FACE_X.T                                                # faces -X
+
+
+@pytest.mark.parametrize("name,rot,scale,ext,axes", [
+    ("zup_mm", ZUP, 1000.0, "obj", "up +z, front -y"),
+    ("facex_cm", FACE_X, 100.0, "ply", "up +y, front +x"),
+    ("facemx_cm", FACE_MX, 100.0, "obj", "up +y, front -x"),
+    ("upside_down_m", np.diag([-1.0, -1.0, 1.0]), 1.0, "ply", "up -y, front +z"),
+])
+def test_rescaled_rotated_comes_back_identical(tmp_path, source, body, name, rot, scale, ext, axes):
+    v, f = source
+    path = write(tmp_path / f"{name}.{ext}", v @ rot.T * scale, f)
+    b = load_body_file(path)
+    assert b.vertices.shape == body.vertices.shape
+    assert np.abs(b.vertices - body.vertices).max() < 1e-3
+    assert any(axes in n for n in b.notes), b.notes
+    # to_world maps the file's coordinates onto the result.
+    fv = v @ rot.T * scale
+    assert np.abs(fv @ b.to_world[:3, :3].T + b.to_world[:3, 3] - b.vertices).max() < 1e-6
+
+
+def test_up_front_override(tmp_path, source, body):
+    v, f = source
+    path = write(tmp_path / "zup.ply", v @ ZUP.T, f)
+    b = load_body_file(path, up="+z", front="-y")
+    assert np.abs(b.vertices - body.vertices).max() < 1e-6
+    wrong = load_body_file(path, up="+z", front="+y")  # user's choice wins, even if odd
+    assert np.abs(wrong.vertices[:, 2] + body.vertices[:, 2]).max() < 1e-6
+
+
+def test_stl_and_glb(tmp_path, source, body):
+    v, f = source
+    for ext in ("stl", "glb"):
+        b = load_body_file(write(tmp_path / f"b.{ext}", v, f))
+        assert len(b.vertices) == len(body.vertices) and len(b.faces) == len(body.faces)
+        assert abs(b.height - body.height) < 1e-6
+
+
+def test_pieces_tiny_bits_dropped_head_kept(tmp_path, source):
+    v, f = source
+    # Cut the head off: faces above 1.45 m get their own copy of their vertices, lifted by 2 mm
+    # (coincident copies would rightly be merged back).
+    head = v[f].mean(axis=1)[:, 1] > 1.45
+    hv_idx, hf = np.unique(f[head], return_inverse=True)
+    f2 = [f[~head], hf.reshape(-1, 3) + len(v)]
+    v2 = [v, v[hv_idx] + [0.0, 0.002, 0.0]]
+    n = len(v) + len(hv_idx)
+    # Three tiny floating bits inside the bounding box.
+    for c in ([0.4, 1.0, 0.1], [-0.4, 0.5, -0.1], [0.0, 0.3, 0.12]):
+        s = trimesh.creation.icosphere(subdivisions=1, radius=0.004)
+        v2.append(s.vertices + c)
+        f2.append(s.faces + n)
+        n += len(s.vertices)
+    path = write(tmp_path / "pieces.ply", np.vstack(v2), np.vstack(f2))
+    b = load_body_file(path)
+    assert len(b.faces) == len(f)
+    assert abs(b.height - 1.662) < 0.005
+    notes = " ".join(b.notes)
+    assert "dropped 3 small disconnected piece" in notes
+    assert "2 separate pieces" in notes
+    assert "hole" in notes  # the cut left open loops
+
+
+def test_holes_reported(tmp_path, source):
+    v, f = source
+    path = write(tmp_path / "holes.obj", v, f[50:])  # remove a few faces -> a hole
+    b = load_body_file(path)
+    assert any("hole" in n and "cm around" in n for n in b.notes)
+
+
+def refuse(path, match=None, **kw):
+    with pytest.raises(InputError) as e:
+        load_body_file(path, **kw)
+    msg = str(e.value)
+    assert "\n" not in msg and msg
+    if match:
+        assert match in msg, msg
+    return msg
+
+
+def test_refuse_missing_and_unsupported(tmp_path):
+    refuse(tmp_path / "nope.obj", "not found")
+    p = tmp_path / "body.fbx"
+    p.write_bytes(b"xx")
+    refuse(p, "unsupported")
+
+
+def test_refuse_empty(tmp_path):
+    p = tmp_path / "e.obj"
+    p.write_bytes(b"")
+    refuse(p, "empty")
+
+
+@pytest.mark.parametrize("ext", ["obj", "ply", "stl", "off", "glb"])
+def test_refuse_garbage(tmp_path, ext):
+    p = tmp_path / f"g.{ext}"
+    p.write_bytes(np.random.default_rng(1).bytes(4000))
+    refuse(p)
+
+
+def test_refuse_point_cloud(tmp_path, source):
+    p = tmp_path / "pc.ply"
+    trimesh.PointCloud(source[0]).export(p)
+    refuse(p, "points")
+
+
+def test_refuse_nan(tmp_path, source):
+    v, f = source
+    v = v.copy()
+    v[10] = np.nan
+    p = tmp_path / "nan.obj"
+    lines = [f"v {a} {b} {c}" for a, b, c in v] + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in f]
+    p.write_text("\n".join(lines))
+    refuse(p, "non-finite")
+
+
+def test_refuse_sizes(tmp_path, source):
+    v, f = source
+    refuse(write(tmp_path / "small.ply", v * (0.1 / 1.662), f), "not human-sized")
+    refuse(write(tmp_path / "big.ply", v * (30.0 / 1.662), f), "not human-sized")
+
+
+def test_refuse_triangle_cap(tmp_path, source, monkeypatch):
+    path = write(tmp_path / "b.ply", *source)
+    refuse(path, "limit of 1,000", max_triangles=1000)
+    monkeypatch.setenv("TRYON_MAX_TRIANGLES", "2000")
+    refuse(path, "limit of 2,000")
+
+
+@pytest.mark.parametrize("up,front", [("q", None), (None, "+w"), ("+y", "-y"), ("x", "x")])
+def test_refuse_bad_axes(tmp_path, up, front):
+    refuse(SAMPLE, up=up, front=front)
