@@ -10,14 +10,16 @@ import numpy as np
 from numba import njit, prange
 
 VM_ZERO, VM_AVERAGE, VM_DIRECTIONAL, VM_PROVOT = 0, 1, 2, 3
+MAX_PUSH = 1.0  # m/s: fastest a collision response moves a point out of the body
 VM_MODES = {"zero": VM_ZERO, "average": VM_AVERAGE, "directional": VM_DIRECTIONAL, "provot": VM_PROVOT}
 
 
 @njit(parallel=True, fastmath=True, cache=True)
 def eval_forces_and_integrate(x, v, inv_mass, mass, ptr, other, sid, rest, k,
-                              seam_ptr, seam_other, k_seam, gravity, damping,
+                              seam_ptr, seam_other, k_seam, seam_fmax, gravity, damping,
                               contact, contact_n, mu, dt, f_out):
-    """Per vertex: springs (eq. 2), seam pull (zero-rest-length springs), gravity, viscous
+    """Per vertex: springs (eq. 2), seam pull (zero-rest-length springs whose force is capped at
+    seam_fmax so wide-open seams close at a bounded speed), gravity, viscous
     damping, then the reaction force of seed 000 eq. 16 where the vertex touched the body in
     the previous step (cancel the force into the body, Coulomb friction on the tangential part),
     then the velocity half of eq. 3: v += dt f / m. f_out keeps the force for diagnostics."""
@@ -40,9 +42,16 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, ptr, other, sid, rest, k,
                 fz += c * dz
         for e in range(seam_ptr[i], seam_ptr[i + 1]):
             j = seam_other[e]
-            fx += k_seam * (x[j, 0] - x[i, 0])
-            fy += k_seam * (x[j, 1] - x[i, 1])
-            fz += k_seam * (x[j, 2] - x[i, 2])
+            dx = x[j, 0] - x[i, 0]
+            dy = x[j, 1] - x[i, 1]
+            dz = x[j, 2] - x[i, 2]
+            c = k_seam
+            pull = k_seam * np.sqrt(dx * dx + dy * dy + dz * dz)
+            if pull > seam_fmax:
+                c *= seam_fmax / pull
+            fx += c * dx
+            fy += c * dy
+            fz += c * dz
         if contact[i]:
             nx, ny, nz = contact_n[i, 0], contact_n[i, 1], contact_n[i, 2]
             fn = fx * nx + fy * ny + fz * nz
@@ -188,6 +197,8 @@ def _respond(vx, vy, vz, nx, ny, nz, bx, by, bz, depth, tol, refl, mu, dt):
     if vn < 0.0:
         new_vn = -refl * vn
     push = 0.5 * (depth - 0.5 * tol) / dt  # depth: metres inside the surface + band
+    if push > MAX_PUSH:  # a point deep inside (e.g. pulled through by a seam) leaves gently
+        push = MAX_PUSH
     if push > new_vn:
         new_vn = push
     dvn = new_vn - vn

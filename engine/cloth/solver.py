@@ -64,23 +64,27 @@ class ClothSolver:
         self.iterations = 0
         self.last_hits = 0
 
-    def set_seams(self, pairs: np.ndarray, k_seam: float) -> None:
-        """Seam forces: zero-rest-length springs of stiffness k_seam between sewn vertex pairs."""
+    def set_seams(self, pairs: np.ndarray, k_seam: float, fmax: float = np.inf) -> None:
+        """Seam forces: zero-rest-length springs of stiffness k_seam between sewn vertex pairs,
+        each pull capped at fmax newtons."""
         n = self.model.n
         if len(pairs):
             self.seam_ptr, self.seam_other, _ = csr_adjacency(n, pairs.astype(np.int64))
         else:
             self.seam_ptr, self.seam_other = np.zeros(n + 1, np.int64), np.zeros(0, np.int32)
         self.k_seam = float(k_seam)
+        self.seam_fmax = float(fmax)
 
-    def step(self, state: ClothState, gravity_scale: float = 1.0) -> None:
+    def step(self, state: ClothState, gravity_scale: float = 1.0, damping_scale: float = 1.0,
+             friction_scale: float = 1.0) -> None:
         m, p, dt = self.model, self.model.params, self.dt
         t0 = time.perf_counter()
         # forces (eq. 2, gravity, damping, seams, reaction eq. 16) and v += dt a (eq. 3)
         K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, m.adj_ptr, m.adj_other,
                                     m.adj_spring, m.rest, m.stiffness, self.seam_ptr, self.seam_other,
-                                    self.k_seam, self.gravity * gravity_scale, p.damping,
-                                    self.contact, self.contact_n, m.fabric.friction, dt, self.f)
+                                    self.k_seam, self.seam_fmax, self.gravity * gravity_scale,
+                                    p.damping * damping_scale,
+                                    self.contact, self.contact_n, m.fabric.friction * friction_scale, dt, self.f)
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 §3)
         K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
                             self.mode, self.gravity * gravity_scale, dt, self.body_v, p.vm_passes)
@@ -91,7 +95,8 @@ class ClothSolver:
             status, normal, bvel, depth = self.collider.query(self.points)
             self.last_hits = K.collision_response(state.v, status, normal, bvel, depth, self.point_v, m.n,
                                                   m.quads, m.tris, p.tolerance, p.reflection,
-                                                  m.fabric.friction, dt, self.contact, self.contact_n,
+                                                  m.fabric.friction * friction_scale, dt, self.contact,
+                                                  self.contact_n,
                                                   self.body_v)
         t2 = time.perf_counter()
         # positions (eq. 3); Provot's position modification when chosen as the comparison

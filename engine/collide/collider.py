@@ -1,0 +1,39 @@
+"""Colliders for the cloth solver: the protocol of engine.cloth.solver (status, normal, body
+velocity, depth past the band's outer edge) answered from image-space collision maps."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from engine.collide.maps import CollisionMaps
+from engine.collide.query import query_batch
+
+
+class MapCollider:
+    """Cloth points against CollisionMaps (vertex and face-midpoint checks, seed 003 §5.3).
+    Output arrays are reused between calls (one call per simulation step); set_maps() swaps
+    in a new body frame's maps (walking)."""
+
+    def __init__(self, maps: CollisionMaps, tol: float | None = None):
+        self.maps = maps
+        self.tol = float(maps.tol if tol is None else tol)
+        self._n = -1
+
+    def set_maps(self, maps: CollisionMaps) -> None:
+        self.maps = maps
+
+    def _alloc(self, n: int) -> None:
+        self.status = np.zeros(n, np.int8)
+        self.surface = np.zeros((n, 3))
+        self.depth = np.zeros(n)
+        self.normal = np.zeros((n, 3))
+        self.velocity = np.zeros((n, 3))
+        self.map_index = np.zeros(n, np.int32)
+        self._n = n
+
+    def query(self, points: np.ndarray):
+        if points.shape[0] != self._n:
+            self._alloc(points.shape[0])
+        query_batch(points, self.tol, *self.maps.kernel_args(), self.status, self.surface, self.depth,
+                    self.normal, self.velocity, self.map_index)
+        return self.status, self.normal, self.velocity, self.depth

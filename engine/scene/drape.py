@@ -1,0 +1,177 @@
+"""Dress a standing body (seed 003 end to end): sew the placed panels, then drape.
+
+Stages end on measured conditions within a bounded budget of simulated time:
+- sew: gravity and friction off (the panels slide over the body into place), seam forces pull stitch pairs together; a pair closer than `weld_gap` is
+  welded (moves as one point); when every pair is welded the sewn vertices are merged. If the
+  budget runs out first, SimulationError names the seams that stayed open and their gaps.
+- drape: gravity on until the cloth's RMS speed stays below `settle_speed` for `settle_time`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from engine.cloth.fabrics import get_fabric
+from engine.cloth.model import ClothModel, ClothParams, ClothState, build_model, weld_model
+from engine.cloth.solver import ClothSolver, Collider
+from engine.cloth.welds import hold_welds, merge_map, seam_gaps
+from engine.errors import InputError, SimulationError
+from engine.garment.garment import Garment
+
+Progress = Callable[[str, float, str], None]  # (stage, fraction 0..1, message)
+
+
+@dataclass
+class DrapeOptions:
+    fabric: str = "cotton"
+    dt: float | None = None  # None: the eq. 4 bound
+    force_dt: bool = False
+    params: ClothParams = field(default_factory=ClothParams)
+    weld_gap: float = 0.003  # m: a seam pair this close is welded
+    seam_accel: float = 400.0  # m/s^2: cap of the seam pull per unit of vertex mass
+    sew_damping: float = 20.0  # x the viscous damping while sewing (no flapping)
+    sew_budget: float = 3.0  # s of simulated time
+    drape_budget: float = 4.0  # s of simulated time
+    drape_min: float = 0.5  # s: drape at least this long after sewing
+    settle_speed: float = 0.01  # m/s RMS
+    settle_time: float = 0.2  # s
+
+
+@dataclass
+class DrapeResult:
+    positions: np.ndarray  # (N, 3) final cloth vertices (sewn)
+    triangles: np.ndarray  # (F, 3) int32
+    model: ClothModel
+    state: ClothState
+    iterations: dict
+    timing: dict
+    seam_gap_max: float
+    settled: bool
+    kinetic_energy: float
+    strain_max: float
+    dt: float
+
+
+def _noop(stage: str, fraction: float, message: str) -> None:
+    pass
+
+
+def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOptions | None = None,
+                  progress: Progress = _noop) -> DrapeResult:
+    o = options or DrapeOptions()
+    fabric = get_fabric(o.fabric)
+    model = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris,
+                        garment.seams, fabric, _edge(garment), o.params)
+    state = ClothState(garment.positions.copy(), np.zeros_like(garment.positions))
+    solver = ClothSolver(model, collider, dt=o.dt, force_dt=o.force_dt)
+    dt = solver.dt
+    iters = {"sewing": 0, "draping": 0}
+    timing = {"sewing": 0.0, "draping": 0.0}
+    cloth_t = {"cloth": 0.0, "collision": 0.0}
+
+    # --- sew ---
+    t0 = time.perf_counter()
+    pairs = garment.seams.astype(np.int64)
+    gap_max = 0.0
+    if len(pairs):
+        k_seam = float(model.stiffness.max())
+        fmax = o.seam_accel * float(np.median(model.mass))
+        solver.set_seams(pairs, k_seam, fmax)
+        welded = np.zeros(len(pairs), dtype=np.bool_)
+        gaps = np.zeros(len(pairs))
+        budget = int(np.ceil(o.sew_budget / dt))
+        gap0 = float(seam_gaps(state.x, pairs, gaps).max())
+        check_every = max(1, int(0.005 / dt))
+        for it in range(budget):
+            solver.step(state, gravity_scale=0.0, damping_scale=o.sew_damping, friction_scale=0.0)
+            hold_welds(state.x, state.v, model.mass, pairs, welded)
+            if it % check_every == 0:
+                seam_gaps(state.x, pairs, gaps)
+                welded |= gaps < o.weld_gap
+                _check_finite(state, "sewing")
+                if welded.all():
+                    break
+                g = float(gaps[~welded].max())
+                progress("sewing", min(1.0, 1.0 - g / max(gap0, 1e-9)), f"largest open seam gap {g * 100:.1f} cm")
+        iters["sewing"] = solver.iterations
+        seam_gaps(state.x, pairs, gaps)
+        if not welded.all():
+            open_ids = np.unique(garment.seam_id[~welded])
+            worst = {int(s): float(gaps[(garment.seam_id == s) & ~welded].max()) for s in open_ids}
+            names = ", ".join(f"{garment.stitch_names[s]} ({g * 100:.1f} cm)" for s, g in
+                              sorted(worst.items(), key=lambda kv: -kv[1])[:5])
+            err = SimulationError(f"sewing did not close within {o.sew_budget:.1f} s of simulated time; "
+                                  f"open seams: {names}. The garment may be too small for this body "
+                                  "(try a larger size) or the panels start too far apart")
+            err.positions, err.triangles = state.x.copy(), _triangles(model)  # for a picture
+            raise err
+        gap_max = float(gaps.max())
+        # merge the sewn vertices and continue on the welded model
+        vmap = merge_map(model.n, pairs)
+        x_new = np.zeros((int(vmap.max()) + 1, 3))
+        v_new = np.zeros_like(x_new)
+        w = np.zeros(len(x_new))
+        np.add.at(x_new, vmap, state.x * model.mass[:, None])
+        np.add.at(v_new, vmap, state.v * model.mass[:, None])
+        np.add.at(w, vmap, model.mass)
+        cloth_t = {k: v for k, v in solver.timing.items()}
+        model = weld_model(model, vmap)
+        state = ClothState(x_new / w[:, None], v_new / w[:, None])
+        solver = ClothSolver(model, collider, dt=dt, force_dt=True)  # dt already validated above
+    timing["sewing"] = time.perf_counter() - t0
+
+    # --- drape ---
+    t0 = time.perf_counter()
+    budget = int(np.ceil(o.drape_budget / dt))
+    min_it = int(np.ceil(o.drape_min / dt))
+    need = int(np.ceil(o.settle_time / dt))
+    total_mass = float(model.mass.sum())
+    calm = 0
+    settled = False
+    check_every = max(1, int(0.005 / dt))
+    rms = np.inf
+    for it in range(budget):
+        solver.step(state)
+        if it % check_every == 0:
+            _check_finite(state, "draping")
+            rms = np.sqrt(2.0 * solver.kinetic_energy(state) / total_mass)
+            calm = calm + check_every if rms < o.settle_speed else 0
+            progress("draping", min(1.0, it / max(min_it, 1)), f"rms speed {rms * 100:.2f} cm/s")
+            if calm >= need and it >= min_it:
+                settled = True
+                break
+    iters["draping"] = solver.iterations
+    timing["draping"] = time.perf_counter() - t0
+    for k in cloth_t:
+        cloth_t[k] += solver.timing[k]
+    return DrapeResult(positions=state.x.copy(), triangles=_triangles(model), model=model, state=state,
+                       iterations=iters, timing={**timing, **{f"{k}_total": v for k, v in cloth_t.items()}},
+                       seam_gap_max=gap_max, settled=settled, kinetic_energy=solver.kinetic_energy(state),
+                       strain_max=solver.max_strain(state), dt=dt)
+
+
+def _edge(g: Garment) -> float:
+    """The garment's grid spacing (from its quads), used for flexion stiffness."""
+    if len(g.quads):
+        q = g.uv[g.quads]
+        return float(np.median(np.linalg.norm(q[:, 1] - q[:, 0], axis=1)))
+    t = g.uv[g.tris]
+    return float(np.median(np.linalg.norm(t[:, 1] - t[:, 0], axis=1)))
+
+
+def _triangles(m: ClothModel) -> np.ndarray:
+    q = m.quads
+    return np.concatenate([m.tris, q[:, [0, 1, 2]], q[:, [0, 2, 3]]]).astype(np.int32)
+
+
+def _check_finite(state: ClothState, stage: str) -> None:
+    if not (np.all(np.isfinite(state.x)) and np.all(np.isfinite(state.v))):
+        raise SimulationError(f"the cloth became unstable while {stage} (non-finite positions); "
+                              "use a smaller time step or a softer fabric")
+    if np.abs(state.x).max() > 100.0:
+        raise SimulationError(f"the cloth flew off while {stage} (a vertex is more than 100 m away); "
+                              "use a smaller time step")
