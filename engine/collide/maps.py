@@ -325,7 +325,12 @@ class MapRenderer:
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self._fbo)
         n_targets = 2 if self.with_velocity else 1
         GL.glDrawBuffers(n_targets, [GL.GL_COLOR_ATTACHMENT0, GL.GL_COLOR_ATTACHMENT1][:n_targets])
-        GL.glDisable(GL.GL_CULL_FACE)         # the back camera sees back faces, by design
+        # Each camera needs only the faces turned toward it: on a closed, outward-wound body the
+        # nearest surface always faces the camera, and through the open cut of a segment mesh a
+        # camera must not see that segment's inside. The back camera keeps the front's x, y (its
+        # image is mirrored), so faces turned toward it wind clockwise on screen: cull GL_FRONT.
+        GL.glEnable(GL.GL_CULL_FACE)
+        GL.glFrontFace(GL.GL_CCW)
         GL.glDisable(GL.GL_BLEND)
         GL.glEnable(GL.GL_DEPTH_TEST)
         GL.glDepthFunc(GL.GL_LESS)            # both cameras map their near plane to depth 0
@@ -349,11 +354,13 @@ class MapRenderer:
             offset, count = self._ranges[s]
             # front camera at z = zf looking toward -z: depth = (zf - z) / d
             GL.glViewport(cf, r0, w, h)
+            GL.glCullFace(GL.GL_BACK)
             GL.glUniform2f(self._u_z, -2.0 / d, 2.0 * zf / d - 1.0)
             GL.glDrawElements(GL.GL_TRIANGLES, count, GL.GL_UNSIGNED_INT, GL.GLvoidp(offset))
             # back camera at z = zb looking toward +z: depth = (z - zb) / d; same x, y mapping,
             # so the back block is on the front's grid (un-mirrored)
             GL.glViewport(cb, r0, w, h)
+            GL.glCullFace(GL.GL_FRONT)
             GL.glUniform2f(self._u_z, 2.0 / d, -2.0 * zb / d - 1.0)
             GL.glDrawElements(GL.GL_TRIANGLES, count, GL.GL_UNSIGNED_INT, GL.GLvoidp(offset))
 
