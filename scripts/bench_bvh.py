@@ -26,7 +26,7 @@ import trimesh  # noqa: E402
 
 from engine.collide.bvh import MeshBVH, ObjectSpaceCollider  # noqa: E402
 
-DEFAULT_BODY = "/work/shared/samples/garmentcode/mean_female.obj"
+DEFAULT_BODY = str(Path(__file__).resolve().parents[2] / "shared/samples/garmentcode/mean_female.obj")
 
 
 def _median_time(fn, repeat):

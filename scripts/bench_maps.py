@@ -24,7 +24,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-SAMPLE = Path("/work/shared/samples/garmentcode/mean_female.obj")
+SAMPLE = Path(__file__).resolve().parents[2] / "shared/samples/garmentcode/mean_female.obj"
 
 
 def load_body():

@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 import trimesh
 
+from tests.samples import SAMPLE_BODY, SAMPLE_YAML  # noqa: F401
 from engine.body.load import load_body_file
 from engine.errors import InputError
 
-SAMPLE = Path("/work/shared/samples/garmentcode/mean_female.obj")
+SAMPLE = SAMPLE_BODY
 
 
 @pytest.fixture(scope="module")

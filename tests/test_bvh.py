@@ -15,18 +15,16 @@ import pytest
 import trimesh
 from numba import njit, prange
 
+from tests.samples import SAMPLE_BODY
 from engine.collide.bvh import (BAND, CLEAR, INSIDE, MeshBVH, ObjectSpaceCollider,
                                 penetration_stats)
 
-BODY = Path("/work/shared/samples/garmentcode/mean_female.obj")
-ROOT_BODY = Path(__file__).resolve().parents[1] / "shared/samples/garmentcode/mean_female.obj"
+BODY = SAMPLE_BODY
 
 
 def _body_path():
-    for p in (ROOT_BODY, BODY):
-        if p.exists():
-            return p
-    pytest.skip("sample body mean_female.obj not found")
+    assert BODY.exists(), f"sample body missing: {BODY} (../shared/samples beside the repository)"
+    return BODY
 
 
 @pytest.fixture(scope="module")

@@ -12,10 +12,11 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
+from tests.samples import SAMPLE_BODY, SAMPLE_YAML  # noqa: F401
 from engine.cli import app
 
-SAMPLE = Path("/work/shared/samples/garmentcode/mean_female.obj")
-REF = yaml.safe_load(Path("/work/shared/samples/garmentcode/mean_female.yaml").read_text())["body"]
+SAMPLE = SAMPLE_BODY
+REF = yaml.safe_load(SAMPLE_YAML.read_text())["body"]
 TRYON = Path(sys.executable).parent / "tryon"
 
 

@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 import yaml
 
+from tests.samples import SAMPLE_BODY, SAMPLE_YAML  # noqa: F401
 from engine.body.load import load_body_file
 from engine.body.measure import Measurements, measure, slice_pieces, slice_stack
 
-SAMPLE = Path("/work/shared/samples/garmentcode/mean_female.obj")
-REF = yaml.safe_load(Path("/work/shared/samples/garmentcode/mean_female.yaml").read_text())["body"]
+SAMPLE = SAMPLE_BODY
+REF = yaml.safe_load(SAMPLE_YAML.read_text())["body"]
 
 
 @pytest.fixture(scope="module")
