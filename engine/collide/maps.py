@@ -31,7 +31,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from engine.body.types import SEGMENT_ID, SEGMENTS, Body
 from engine.collide.gl import GL, compile_program, ensure_context, read_pixels
@@ -427,7 +427,7 @@ def _bbox(vertices, idx):
     return lo, hi
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _finish_maps(surf, vel, has_vel, depth, layout, ring, kind, side_src):
     """Classify pixels, build the side layer, and define every non-body pixel of every block.
 
@@ -436,13 +436,14 @@ def _finish_maps(surf, vel, has_vel, depth, layout, ring, kind, side_src):
     need no clear: every empty pixel is overwritten here. The nearest body pixel within `ring`
     (Euclidean, pixel centres) is found separably: nearest body column per row first, then
     the best row -- exact, and (2*ring+1) reads per pixel instead of (2*ring+1)^2.
-    Serial on purpose: it takes ~1 ms, and parallel workers spinning after it would compete
-    with llvmpipe's rasteriser threads for the same cores."""
+    Rows are independent in both passes (the second writes only non-body pixels and reads
+    only body pixels and the first pass's result), so both run in parallel over rows; the
+    read-backs before it have already waited for the rasteriser, so the cores are free."""
     wa = surf.shape[1]
     for m in range(layout.shape[0]):
         h, w, r0, cf, cb = layout[m, 0], layout[m, 1], layout[m, 2], layout[m, 3], layout[m, 4]
         near = np.full((h, w), -1, np.int32)        # nearest body column in the row, or -1
-        for i in range(h):
+        for i in prange(h):
             r = r0 + i
             last = -(1 << 30)
             for j in range(w):
@@ -459,7 +460,7 @@ def _finish_maps(surf, vel, has_vel, depth, layout, ring, kind, side_src):
                     nxt = j
                 if nxt - j <= ring and (near[i, j] < 0 or nxt - j < j - near[i, j]):
                     near[i, j] = nxt
-        for i in range(h):
+        for i in prange(h):
             r = r0 + i
             for j in range(w):
                 if kind[r, cf + j] == 1:
