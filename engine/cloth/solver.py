@@ -98,6 +98,10 @@ class ClothSolver:
                                                   m.fabric.friction * friction_scale, dt, self.contact,
                                                   self.contact_n,
                                                   self.body_v)
+            # the body may push cloth outward along a stretched spring: one more pass keeps
+            # the strain limit (the velocity response stays: the pass acts along springs)
+            K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
+                                self.mode, self.gravity * gravity_scale, dt, self.body_v, 1)
         t2 = time.perf_counter()
         # positions (eq. 3); Provot's position modification when chosen as the comparison
         K.integrate_positions(state.x, state.v, dt)

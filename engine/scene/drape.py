@@ -34,6 +34,8 @@ class DrapeOptions:
     weld_gap: float = 0.003  # m: a seam pair this close is welded
     seam_accel: float = 400.0  # m/s^2: cap of the seam pull per unit of vertex mass
     sew_damping: float = 20.0  # x the viscous damping while sewing (no flapping)
+    sew_friction: float = 1.0  # x the fabric's friction while sewing
+    drape_damping: float = 25.0  # x the viscous damping while draping (a static result: settle)
     sew_budget: float = 3.0  # s of simulated time
     drape_budget: float = 4.0  # s of simulated time
     drape_min: float = 0.5  # s: drape at least this long after sewing
@@ -87,7 +89,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
         gap0 = float(seam_gaps(state.x, pairs, gaps).max())
         check_every = max(1, int(0.005 / dt))
         for it in range(budget):
-            solver.step(state, gravity_scale=0.0, damping_scale=o.sew_damping, friction_scale=0.0)
+            solver.step(state, gravity_scale=0.0, damping_scale=o.sew_damping, friction_scale=o.sew_friction)
             hold_welds(state.x, state.v, model.mass, pairs, welded)
             if it % check_every == 0:
                 seam_gaps(state.x, pairs, gaps)
@@ -135,7 +137,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
     check_every = max(1, int(0.005 / dt))
     rms = np.inf
     for it in range(budget):
-        solver.step(state)
+        solver.step(state, damping_scale=o.drape_damping)
         if it % check_every == 0:
             _check_finite(state, "draping")
             rms = np.sqrt(2.0 * solver.kinetic_energy(state) / total_mass)
