@@ -192,7 +192,7 @@ class MapRenderer:
             subsets, seg_ids = [faces], [-1]
         else:
             if segments is None:
-                raise InputError("segment maps need per-vertex segment labels; this body has none")
+                raise InputError("segment maps need per-vertex segment labels and this body has none (scans are not segmented yet): leave out --segments to map the whole body")
             subsets, seg_ids = [], []
             for name in segment_names:
                 if name not in SEGMENT_ID:
