@@ -126,6 +126,86 @@ def render_cmd(
     _run(go)
 
 
+def _progress_printer():
+    """A one-line progress display on stderr (rich), returned with its context manager."""
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    prog = Progress(TextColumn("{task.fields[stage]:>8}"), BarColumn(), TextColumn("{task.fields[msg]}"),
+                    TimeElapsedColumn(), transient=True, console=None, redirect_stdout=False)
+    task = prog.add_task("tryon", total=1.0, stage="", msg="")
+
+    def update(stage: str, fraction: float, message: str) -> None:
+        prog.update(task, completed=max(0.0, min(1.0, fraction)), stage=stage, msg=message)
+
+    return prog, update
+
+
+@app.command("drape")
+def drape_cmd(
+    body: str = typer.Option(..., "--body", help=BODY_HELP),
+    garment: str = typer.Option(..., "--garment", help="A catalogue garment (see `tryon garments`) or a "
+                                "GarmentCode pattern file (.json)."),
+    size: str = typer.Option("M", "--size", help="Catalogue size: XS, S, M, L, XL, XXL."),
+    fabric: str = typer.Option("cotton", "--fabric", help="cotton, denim, silk or jersey."),
+    out: Path = typer.Option(Path("out/drape"), "--out", help="Output directory."),
+    resolution: float = typer.Option(1.5, "--resolution", help="Cloth edge length in cm."),
+    texel: float = typer.Option(5.0, "--texel", help="Collision map texel in mm (seed 003 §5.4: 5 mm)."),
+    collision: str = typer.Option("image", "--collision", help="image (depth/normal maps) or object (BVH)."),
+    dt: Optional[float] = typer.Option(None, "--dt", help="Time step in ms (default: the eq. 4 bound)."),
+    force_dt: bool = typer.Option(False, "--force-dt", help="Allow a time step above the eq. 4 bound."),
+    velocity_mode: str = typer.Option("average", "--velocity-mode",
+                                      help="Super-elasticity rule: zero (seed 003), average (eq. 5), "
+                                      "directional (eq. 6) or provot (position modification)."),
+    up: Optional[str] = typer.Option(None, "--up", help=UP_HELP),
+    front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP),
+):
+    """Dress a standing body: mesh the pattern, place it, sew, drape; write scene.glb, garment.obj,
+    front/side/back.png and report.json."""
+
+    def go():
+        from dataclasses import replace
+
+        from engine.cloth.model import ClothParams
+        from engine.errors import SimulationError
+        from engine.scene.drape import DrapeOptions
+        from engine.scene.garments import resolve_garment
+        from engine.scene.tryon import run_tryon, write_outputs
+
+        b = _body(body, up, front)
+        spec, place, name = resolve_garment(garment, b, size)
+        params = replace(ClothParams(), velocity_mode=velocity_mode)
+        opts = DrapeOptions(fabric=fabric, dt=None if dt is None else dt / 1000.0, force_dt=force_dt,
+                            params=params)
+        prog, update = _progress_printer()
+        with prog:
+            try:
+                res, report = run_tryon(b, spec, fabric=fabric, h=resolution / 100.0, texel=texel / 1000.0,
+                                        collision=collision, options=opts, place=place, source=name,
+                                        progress=update)
+            except SimulationError as e:
+                if getattr(e, "positions", None) is not None:
+                    from PIL import Image
+
+                    from engine.io.render import BODY_RGB, render_meshes
+
+                    out.mkdir(parents=True, exist_ok=True)
+                    img = render_meshes([(b.vertices, b.faces, BODY_RGB), (e.positions, e.triangles, (0.8, 0.3, 0.3))],
+                                        size=600, view="three")
+                    Image.fromarray(img).save(out / "failed.png")
+                    typer.echo(f"note: picture of the failed state: {out / 'failed.png'}", err=True)
+                raise
+        for p in write_outputs(out, b, res, report):
+            typer.echo(str(p))
+        r = report
+        typer.echo(f"{r['cloth_vertices']} cloth vertices, {r['iterations']} iterations, "
+                   f"{r['ms_per_iteration']['total']:.2f} ms/iteration, {r['wall_seconds']['total']:.1f} s; "
+                   f"penetration max {r['penetration_mm']['max']:.1f} mm p99 {r['penetration_mm']['p99']:.1f} mm; "
+                   f"strain max {100 * r['strain']['max']:.1f} % (threshold {100 * r['strain']['threshold']:.0f} %); "
+                   f"settled: {r['settled']}")
+
+    _run(go)
+
+
 def main() -> None:
     app()
 

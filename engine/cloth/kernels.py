@@ -11,6 +11,7 @@ from numba import njit, prange
 
 VM_ZERO, VM_AVERAGE, VM_DIRECTIONAL, VM_PROVOT = 0, 1, 2, 3
 MAX_PUSH = 1.0  # m/s: fastest a collision response moves a point out of the body
+PUSH_TIME = 0.02  # s: a point too deep in the band is moved out over about this long
 VM_MODES = {"zero": VM_ZERO, "average": VM_AVERAGE, "directional": VM_DIRECTIONAL, "provot": VM_PROVOT}
 
 
@@ -73,89 +74,148 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, ptr, other, sid, rest, k,
 
 
 @njit(fastmath=True, cache=True)
-def modify_velocities(x, v, springs, rest, active, threshold, mode, gravity, dt, body_v, passes):
-    """Velocity modification against super-elasticity, after each step (Gauss-Seidel over the
-    springs). For a spring longer than (1 + threshold) x rest whose ends move apart, the
-    stretching (along-spring) velocity components v1t, v2t are changed:
+def _modify_one(x, v, a, b, rest, threshold, mode, gravity, dt, body_v, recover):
+    """One spring of the velocity modification; returns True if it changed velocities.
+    Beyond the seeds, a spring already past the limit by e is also given a closing speed
+    e / recover (recover: a time, shared by its ends), so strain that got in anyway (sewing, the
+    body pushing cloth outward) is worked off instead of only frozen."""
+    dx = x[b, 0] - x[a, 0]
+    dy = x[b, 1] - x[a, 1]
+    dz = x[b, 2] - x[a, 2]
+    length = np.sqrt(dx * dx + dy * dy + dz * dz)
+    limit = (1.0 + threshold) * rest
+    if length <= limit or length < 1e-12:
+        return False
+    close = (length - limit) / recover  # wanted closing speed
+    ux, uy, uz = dx / length, dy / length, dz / length
+    va = v[a, 0] * ux + v[a, 1] * uy + v[a, 2] * uz
+    vb = v[b, 0] * ux + v[b, 1] * uy + v[b, 2] * uz
+    if vb - va <= -close + 1e-9:  # already shortening fast enough: leave it
+        return False
+    if mode == VM_ZERO:
+        na, nb = 0.5 * close, -0.5 * close
+    elif mode == VM_DIRECTIONAL:
+        gx = gravity[0] * dt + 0.5 * (body_v[a, 0] + body_v[b, 0])
+        gy = gravity[1] * dt + 0.5 * (body_v[a, 1] + body_v[b, 1])
+        gz = gravity[2] * dt + 0.5 * (body_v[a, 2] + body_v[b, 2])
+        gl = np.sqrt(gx * gx + gy * gy + gz * gz)
+        cos = 0.0 if gl < 1e-12 else (gx * ux + gy * uy + gz * uz) / gl
+        if abs(cos) < 0.3:
+            avg = 0.5 * (va + vb)
+            na, nb = avg + 0.5 * close, avg - 0.5 * close
+        elif cos > 0.0:  # p2 = b is ahead along v_dir: the rear a catches up
+            na, nb = vb + close, vb
+        else:
+            na, nb = va, va - close
+    else:  # VM_AVERAGE (and the velocity part of Provot's, which then moves positions)
+        avg = 0.5 * (va + vb)
+        na, nb = avg + 0.5 * close, avg - 0.5 * close
+    v[a, 0] += (na - va) * ux
+    v[a, 1] += (na - va) * uy
+    v[a, 2] += (na - va) * uz
+    v[b, 0] += (nb - vb) * ux
+    v[b, 1] += (nb - vb) * uy
+    v[b, 2] += (nb - vb) * uz
+    return True
+
+
+@njit(fastmath=True, cache=True)
+def modify_velocities(x, v, springs, rest, active, threshold, mode, gravity, dt, body_v, passes, work,
+                      recover, n_known=-1):
+    """Velocity modification against super-elasticity, after each step. For a spring longer
+    than (1 + threshold) x rest whose ends move apart, the stretching (along-spring) velocity
+    components v1t, v2t are changed:
       VM_ZERO (seed 003 §4.3): both set to zero;
       VM_AVERAGE (seed 000 eq. 5): both set to their average;
       VM_DIRECTIONAL (seed 000 eq. 6 + §3.2 rules): v_dir = g dt + v_object; if the spring is
         about perpendicular to v_dir (|cos| < 0.3) use eq. 5, else the rear point (along v_dir)
         takes the front point's component so it catches up.
-    Returns the number of springs modified in the last pass."""
-    count = 0
-    for _ in range(passes):
-        count = 0
-        for s in range(springs.shape[0]):
-            if not active[s]:
-                continue
-            a = springs[s, 0]
-            b = springs[s, 1]
-            dx = x[b, 0] - x[a, 0]
-            dy = x[b, 1] - x[a, 1]
-            dz = x[b, 2] - x[a, 2]
-            length = np.sqrt(dx * dx + dy * dy + dz * dz)
-            if length <= (1.0 + threshold) * rest[s] or length < 1e-12:
-                continue
-            ux, uy, uz = dx / length, dy / length, dz / length
-            va = v[a, 0] * ux + v[a, 1] * uy + v[a, 2] * uz
-            vb = v[b, 0] * ux + v[b, 1] * uy + v[b, 2] * uz
-            if vb - va <= 0.0:  # already shortening: leave it
-                continue
-            count += 1
-            if mode == VM_ZERO:
-                na, nb = 0.0, 0.0
-            elif mode == VM_DIRECTIONAL:
-                gx = gravity[0] * dt + 0.5 * (body_v[a, 0] + body_v[b, 0])
-                gy = gravity[1] * dt + 0.5 * (body_v[a, 1] + body_v[b, 1])
-                gz = gravity[2] * dt + 0.5 * (body_v[a, 2] + body_v[b, 2])
-                gl = np.sqrt(gx * gx + gy * gy + gz * gz)
-                cos = 0.0 if gl < 1e-12 else (gx * ux + gy * uy + gz * uz) / gl
-                if abs(cos) < 0.3:
-                    na = nb = 0.5 * (va + vb)
-                elif cos > 0.0:  # p2 = b is ahead along v_dir: the rear a catches up
-                    na, nb = vb, vb
-                else:
-                    na, nb = va, va
-            else:  # VM_AVERAGE (and the velocity part of Provot's, which then moves positions)
-                na = nb = 0.5 * (va + vb)
-            v[a, 0] += (na - va) * ux
-            v[a, 1] += (na - va) * uy
-            v[a, 2] += (na - va) * uz
-            v[b, 0] += (nb - vb) * ux
-            v[b, 1] += (nb - vb) * uy
-            v[b, 2] += (nb - vb) * uz
-    return count
+    One Gauss-Seidel sweep over all springs collects the over-elongated ones into `work`
+    (int32, len >= S); the remaining passes sweep only those, so many passes stay cheap --
+    they are needed when a whole region is stretched at once (a waistband pushed out by the
+    hips), where each spring's change undoes part of its neighbours'.
+    n_known >= 0: positions have not moved since the call that found n_known over-elongated
+    springs in `work`, so the full sweep is skipped (later rounds of the same step).
+    Returns the number of over-elongated springs."""
+    if n_known >= 0:
+        for _ in range(passes):
+            changed = 0
+            for k in range(n_known):
+                s = work[k]
+                if _modify_one(x, v, springs[s, 0], springs[s, 1], rest[s], threshold, mode, gravity, dt,
+                               body_v, recover):
+                    changed += 1
+            if changed == 0:
+                break
+        return n_known
+    n_act = 0
+    for s in range(springs.shape[0]):
+        if not active[s]:
+            continue
+        a = springs[s, 0]
+        b = springs[s, 1]
+        dx = x[b, 0] - x[a, 0]
+        dy = x[b, 1] - x[a, 1]
+        dz = x[b, 2] - x[a, 2]
+        if dx * dx + dy * dy + dz * dz > ((1.0 + threshold) * rest[s]) ** 2:
+            work[n_act] = s
+            n_act += 1
+            _modify_one(x, v, a, b, rest[s], threshold, mode, gravity, dt, body_v, recover)
+    for _ in range(passes - 1):
+        changed = 0
+        for k in range(n_act):
+            s = work[k]
+            if _modify_one(x, v, springs[s, 0], springs[s, 1], rest[s], threshold, mode, gravity, dt, body_v,
+                           recover):
+                changed += 1
+        if changed == 0:
+            break
+    return n_act
 
 
 @njit(fastmath=True, cache=True)
-def provot_positions(x, springs, rest, active, threshold, inv_mass, passes):
-    """Provot (1995) position modification, the comparison option: move the ends of springs
-    longer than (1 + threshold) x rest toward each other (mass-weighted) back to that length."""
-    for _ in range(passes):
-        for s in range(springs.shape[0]):
-            if not active[s]:
-                continue
-            a = springs[s, 0]
-            b = springs[s, 1]
-            dx = x[b, 0] - x[a, 0]
-            dy = x[b, 1] - x[a, 1]
-            dz = x[b, 2] - x[a, 2]
-            length = np.sqrt(dx * dx + dy * dy + dz * dz)
-            lmax = (1.0 + threshold) * rest[s]
-            if length <= lmax or length < 1e-12:
-                continue
-            wa, wb = inv_mass[a], inv_mass[b]
-            corr = (length - lmax) / (length * (wa + wb))
-            x[a, 0] += wa * corr * dx
-            x[a, 1] += wa * corr * dy
-            x[a, 2] += wa * corr * dz
-            x[b, 0] -= wb * corr * dx
-            x[b, 1] -= wb * corr * dy
-            x[b, 2] -= wb * corr * dz
+def _project_one(x, a, b, lmax, inv_mass):
+    dx = x[b, 0] - x[a, 0]
+    dy = x[b, 1] - x[a, 1]
+    dz = x[b, 2] - x[a, 2]
+    length = np.sqrt(dx * dx + dy * dy + dz * dz)
+    if length <= lmax or length < 1e-12:
+        return False
+    wa, wb = inv_mass[a], inv_mass[b]
+    corr = (length - lmax) / (length * (wa + wb))
+    x[a, 0] += wa * corr * dx
+    x[a, 1] += wa * corr * dy
+    x[a, 2] += wa * corr * dz
+    x[b, 0] -= wb * corr * dx
+    x[b, 1] -= wb * corr * dy
+    x[b, 2] -= wb * corr * dz
+    return True
 
 
-@njit(parallel=True, fastmath=True, cache=True)
+@njit(fastmath=True, cache=True)
+def provot_positions(x, springs, rest, active, threshold, inv_mass, passes, work):
+    """Provot (1995) position modification: move the ends of springs longer than
+    (1 + threshold) x rest toward each other (mass-weighted) back to that length. One sweep
+    finds them (into `work`), further passes revisit only those. Used as the comparison mode
+    and, with a slightly larger threshold, as the strain guard behind the velocity modification.
+    Returns the number of springs found over the limit."""
+    n_act = 0
+    for s in range(springs.shape[0]):
+        if active[s] and _project_one(x, springs[s, 0], springs[s, 1], (1.0 + threshold) * rest[s], inv_mass):
+            work[n_act] = s
+            n_act += 1
+    for _ in range(passes - 1):
+        changed = 0
+        for k in range(n_act):
+            s = work[k]
+            if _project_one(x, springs[s, 0], springs[s, 1], (1.0 + threshold) * rest[s], inv_mass):
+                changed += 1
+        if changed == 0:
+            break
+    return n_act
+
+
+@njit(fastmath=True, cache=True)
 def collision_points(x, v, dt, quads, tris, p_out, pv_out):
     """Points checked against the body: every vertex, every quad midpoint and triangle centroid
     (face-body checks, seed 003 §6), at their predicted positions x + dt v."""
@@ -186,17 +246,36 @@ def collision_points(x, v, dt, quads, tris, p_out, pv_out):
 
 
 @njit(fastmath=True, cache=True)
+def point_velocities(v, quads, tris, pv_out):
+    """Velocities of the checked points (vertices, quad midpoints, triangle centroids) from v."""
+    n = v.shape[0]
+    nq = quads.shape[0]
+    for i in prange(n):
+        for c in range(3):
+            pv_out[i, c] = v[i, c]
+    for q in prange(nq):
+        for c in range(3):
+            pv_out[n + q, c] = 0.25 * (v[quads[q, 0], c] + v[quads[q, 1], c] + v[quads[q, 2], c] + v[quads[q, 3], c])
+    for t in prange(tris.shape[0]):
+        for c in range(3):
+            pv_out[n + nq + t, c] = (v[tris[t, 0], c] + v[tris[t, 1], c] + v[tris[t, 2], c]) / 3.0
+
+
+@njit(fastmath=True, cache=True)
 def _respond(vx, vy, vz, nx, ny, nz, bx, by, bz, depth, tol, refl, mu, dt):
     """Eq. 12 / eq. 15 for one point: relative velocity to the body, reflected normal part
     (C_refl), Coulomb friction on the tangential part (C_fric = max(0, 1 - mu |dv_n| / |v_t|)),
-    and a push that takes a point deeper than the tolerance band back out within ~2 steps."""
+    and a push that takes a point in the inner half of the band (or inside) back out."""
     rx, ry, rz = vx - bx, vy - by, vz - bz
     vn = rx * nx + ry * ny + rz * nz
     tx, ty, tz = rx - vn * nx, ry - vn * ny, rz - vn * nz
     new_vn = vn
     if vn < 0.0:
         new_vn = -refl * vn
-    push = 0.5 * (depth - 0.5 * tol) / dt  # depth: metres inside the surface + band
+    # depth: metres past the band's outer edge. Points in the inner half of the band drift back
+    # out over PUSH_TIME (a resting contact must not be kicked: at dt ~ 0.2 ms a one-step push
+    # would be metres per second of jitter)
+    push = (depth - 0.5 * tol) / PUSH_TIME
     if push > MAX_PUSH:  # a point deep inside (e.g. pulled through by a seam) leaves gently
         push = MAX_PUSH
     if push > new_vn:

@@ -53,6 +53,7 @@ class ClothSolver:
         n = model.n
         self.active = model.kind != FLEXION  # flexion springs may shorten/lengthen with folds
         self.f = np.zeros((n, 3))
+        self.vm_work = np.zeros(len(model.springs), dtype=np.int32)
         self.contact = np.zeros(n, dtype=np.bool_)
         self.contact_n = np.zeros((n, 3))
         self.body_v = np.zeros((n, 3))
@@ -63,6 +64,8 @@ class ClothSolver:
         self.timing = {"cloth": 0.0, "collision": 0.0}
         self.iterations = 0
         self.last_hits = 0
+        self.strain_guard = p.strain_guard  # the drape turns it off while sewing
+        self.recover = p.recover  # ... and the strain recovery (it would fight the seam pull)
 
     def set_seams(self, pairs: np.ndarray, k_seam: float, fmax: float = np.inf) -> None:
         """Seam forces: zero-rest-length springs of stiffness k_seam between sewn vertex pairs,
@@ -86,28 +89,40 @@ class ClothSolver:
                                     p.damping * damping_scale,
                                     self.contact, self.contact_n, m.fabric.friction * friction_scale, dt, self.f)
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 §3)
-        K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
-                            self.mode, self.gravity * gravity_scale, dt, self.body_v, p.vm_passes)
+        n_act = K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
+                                    self.mode, self.gravity * gravity_scale, dt, self.body_v, p.vm_passes,
+                                    self.vm_work, self.recover)
         t1 = time.perf_counter()
         # collision detection and response (vertices and face midpoints, eq. 12/15)
         if self.collider is not None:
             K.collision_points(state.x, state.v, dt, m.quads, m.tris, self.points, self.point_v)
             status, normal, bvel, depth = self.collider.query(self.points)
-            self.last_hits = K.collision_response(state.v, status, normal, bvel, depth, self.point_v, m.n,
-                                                  m.quads, m.tris, p.tolerance, p.reflection,
-                                                  m.fabric.friction * friction_scale, dt, self.contact,
-                                                  self.contact_n,
-                                                  self.body_v)
-            # the body may push cloth outward along a stretched spring: one more pass keeps
-            # the strain limit (the velocity response stays: the pass acts along springs)
-            K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
-                                self.mode, self.gravity * gravity_scale, dt, self.body_v, 1)
+            # The body's push and the strain limit can disagree (a waistband sliding down the hips
+            # is pushed outward while it may not stretch): alternate the two velocity changes a
+            # few rounds on the same contacts -- this converges to "stop sliding" -- and end on the
+            # collision response so nothing moves into the body.
+            for r in range(p.contact_rounds):
+                if r > 0:
+                    K.point_velocities(state.v, m.quads, m.tris, self.point_v)
+                    K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active,
+                                        m.fabric.strain_threshold, self.mode, self.gravity * gravity_scale, dt,
+                                        self.body_v, p.vm_passes, self.vm_work, self.recover, n_act)
+                    K.point_velocities(state.v, m.quads, m.tris, self.point_v)
+                self.last_hits = K.collision_response(state.v, status, normal, bvel, depth, self.point_v, m.n,
+                                                      m.quads, m.tris, p.tolerance, p.reflection,
+                                                      m.fabric.friction * friction_scale, dt, self.contact,
+                                                      self.contact_n, self.body_v)
         t2 = time.perf_counter()
         # positions (eq. 3); Provot's position modification when chosen as the comparison
         K.integrate_positions(state.x, state.v, dt)
         if self.mode == K.VM_PROVOT:
             K.provot_positions(state.x, m.springs, m.rest, self.active, m.fabric.strain_threshold,
-                               m.inv_mass, p.vm_passes)
+                               m.inv_mass, p.vm_passes, self.vm_work)
+        elif self.strain_guard is not None:
+            # what the velocity modification could not hold (the body pushing a band outward)
+            K.provot_positions(state.x, m.springs, m.rest, self.active,
+                               m.fabric.strain_threshold + self.strain_guard, m.inv_mass, p.vm_passes,
+                               self.vm_work)
         t3 = time.perf_counter()
         self.timing["cloth"] += (t1 - t0) + (t3 - t2)
         self.timing["collision"] += t2 - t1

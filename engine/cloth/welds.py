@@ -49,3 +49,35 @@ def merge_map(n: int, pairs: np.ndarray) -> np.ndarray:
     roots = np.array([find(i) for i in range(n)])
     _, new = np.unique(roots, return_inverse=True)
     return new.astype(np.int64)
+
+
+@njit(cache=True)
+def pull_seams(x, v, mass, pairs, welded, tau, vmax):
+    """Sewing as a velocity modification (in the spirit of seed 003 §4.3): each open seam pair
+    gets the relative velocity that closes its gap in time tau (at most vmax), shared so the
+    pair's momentum is unchanged. Welded pairs are held by hold_welds instead."""
+    for k in range(pairs.shape[0]):
+        if welded[k]:
+            continue
+        a, b = pairs[k, 0], pairs[k, 1]
+        wa = mass[b] / (mass[a] + mass[b])  # a moves by the other's mass share
+        wb = mass[a] / (mass[a] + mass[b])
+        dx = x[b, 0] - x[a, 0]
+        dy = x[b, 1] - x[a, 1]
+        dz = x[b, 2] - x[a, 2]
+        gap = np.sqrt(dx * dx + dy * dy + dz * dz)
+        if gap < 1e-12:
+            continue
+        speed = min(gap / tau, vmax)
+        ux, uy, uz = dx / gap, dy / gap, dz / gap
+        # current closing speed along the gap
+        closing = (v[a, 0] - v[b, 0]) * ux + (v[a, 1] - v[b, 1]) * uy + (v[a, 2] - v[b, 2]) * uz
+        if closing >= speed:
+            continue
+        dv = speed - closing
+        v[a, 0] += wa * dv * ux
+        v[a, 1] += wa * dv * uy
+        v[a, 2] += wa * dv * uz
+        v[b, 0] -= wb * dv * ux
+        v[b, 1] -= wb * dv * uy
+        v[b, 2] -= wb * dv * uz

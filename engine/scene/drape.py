@@ -18,7 +18,7 @@ import numpy as np
 from engine.cloth.fabrics import get_fabric
 from engine.cloth.model import ClothModel, ClothParams, ClothState, build_model, weld_model
 from engine.cloth.solver import ClothSolver, Collider
-from engine.cloth.welds import hold_welds, merge_map, seam_gaps
+from engine.cloth.welds import hold_welds, merge_map, pull_seams, seam_gaps
 from engine.errors import InputError, SimulationError
 from engine.garment.garment import Garment
 
@@ -32,14 +32,17 @@ class DrapeOptions:
     force_dt: bool = False
     params: ClothParams = field(default_factory=ClothParams)
     weld_gap: float = 0.003  # m: a seam pair this close is welded
-    seam_accel: float = 400.0  # m/s^2: cap of the seam pull per unit of vertex mass
+    sew_tau: float = 0.02  # s: a seam pair is pulled to close its gap in this time ...
+    sew_vmax: float = 3.0  # m/s: ... at most this fast
     sew_damping: float = 20.0  # x the viscous damping while sewing (no flapping)
     sew_friction: float = 1.0  # x the fabric's friction while sewing
-    drape_damping: float = 25.0  # x the viscous damping while draping (a static result: settle)
+    sew_gravity: float = 0.0  # x gravity while sewing (a flared skirt without gravity opens into a disc)
+    drape_damping: float = 250.0  # x the viscous damping while draping (a static result: settle)
+    gravity_ramp: float = 0.3  # s: gravity grows from 0 to g over this long (no jolt when it starts)
     sew_budget: float = 3.0  # s of simulated time
     drape_budget: float = 4.0  # s of simulated time
     drape_min: float = 0.5  # s: drape at least this long after sewing
-    settle_speed: float = 0.01  # m/s RMS
+    settle_speed: float = 0.02  # m/s RMS (contacts keep a few mm/s of jitter)
     settle_time: float = 0.2  # s
 
 
@@ -80,16 +83,16 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
     pairs = garment.seams.astype(np.int64)
     gap_max = 0.0
     if len(pairs):
-        k_seam = float(model.stiffness.max())
-        fmax = o.seam_accel * float(np.median(model.mass))
-        solver.set_seams(pairs, k_seam, fmax)
         welded = np.zeros(len(pairs), dtype=np.bool_)
         gaps = np.zeros(len(pairs))
         budget = int(np.ceil(o.sew_budget / dt))
         gap0 = float(seam_gaps(state.x, pairs, gaps).max())
         check_every = max(1, int(0.005 / dt))
+        solver.strain_guard = None  # sewing stretches cloth by design; the guard and the strain
+        solver.recover = 1e9  # recovery are for the drape (a new solver is made after welding)
         for it in range(budget):
-            solver.step(state, gravity_scale=0.0, damping_scale=o.sew_damping, friction_scale=o.sew_friction)
+            pull_seams(state.x, state.v, model.mass, pairs, welded, o.sew_tau, o.sew_vmax)
+            solver.step(state, gravity_scale=o.sew_gravity, damping_scale=o.sew_damping, friction_scale=o.sew_friction)
             hold_welds(state.x, state.v, model.mass, pairs, welded)
             if it % check_every == 0:
                 seam_gaps(state.x, pairs, gaps)
@@ -136,8 +139,9 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
     settled = False
     check_every = max(1, int(0.005 / dt))
     rms = np.inf
+    ramp_it = max(1, int(o.gravity_ramp / dt))
     for it in range(budget):
-        solver.step(state, damping_scale=o.drape_damping)
+        solver.step(state, gravity_scale=min(1.0, (it + 1) / ramp_it), damping_scale=o.drape_damping)
         if it % check_every == 0:
             _check_finite(state, "draping")
             rms = np.sqrt(2.0 * solver.kinetic_energy(state) / total_mass)

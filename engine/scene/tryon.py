@@ -1,0 +1,143 @@
+"""Plan and run a static try-on: body + garment -> sewn, draped garment, pictures, report.
+
+The planner looks at the scene first and records what it leaves out ("left out: ... because
+..."): e.g. arm maps for a garment that stays below the shoulders, map rows above the garment.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from engine.body.types import SEGMENTS, Body
+from engine.cloth.fabrics import get_fabric
+from engine.errors import InputError
+from engine.garment.garment import Garment, build_garment, spec_placement
+from engine.pattern.spec import PatternSpec
+from engine.scene.drape import DrapeOptions, DrapeResult, Progress, sew_and_drape
+
+
+@dataclass
+class TryOnPlan:
+    texel: float
+    window: tuple[float, float] | None
+    segments: list[str] | None
+    left_out: list[str] = field(default_factory=list)
+
+
+def plan_maps(body: Body, garment: Garment, texel: float, collision: str) -> TryOnPlan:
+    """Decide which maps to render for this body and garment (DESIGN: a scene leaves out what
+    it does not need)."""
+    left: list[str] = ["velocity maps, because the body does not move"]
+    top = float(garment.positions[:, 1].max())
+    window = (0.0, min(body.vertices[:, 1].max(), top + 0.15))
+    if window[1] < body.vertices[:, 1].max() - 1e-6:
+        left.append(f"map rows above {window[1]:.2f} m, because the garment starts at {top:.2f} m "
+                    "(cloth falls, it does not climb)")
+    segments = None
+    if collision == "object":
+        left = ["collision maps, because object-space collision (BVH) was chosen"]
+        return TryOnPlan(texel, None, None, left)
+    if body.segments is not None:
+        present = set(int(s) for s in np.unique(body.segments))
+        segs = [s for s in ("torso", "left_arm", "right_arm", "left_leg", "right_leg")
+                if SEGMENTS.index(s) in present]
+        # a garment whose top stays below the armpits never meets the arms
+        arm = np.isin(body.segments, [SEGMENTS.index("left_arm"), SEGMENTS.index("right_arm")])
+        torso = body.segments == SEGMENTS.index("torso")
+        armpit = float(body.vertices[arm, 1].min()) if arm.any() else np.inf
+        if top < armpit - 0.05 and torso.any():
+            segs = [s for s in segs if "arm" not in s]
+            left.append(f"arm maps, because the garment stays below the arms (top {top:.2f} m, "
+                        f"armpits {armpit:.2f} m)")
+        segments = segs
+        left.append("head maps, because garments do not reach the head")
+    return TryOnPlan(texel, window, segments, left)
+
+
+def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float = 0.015,
+              texel: float = 0.005, collision: str = "image", options: DrapeOptions | None = None,
+              place=None, source: str = "pattern", progress: Progress | None = None) -> tuple[DrapeResult, dict]:
+    """Sew and drape `spec` on `body`; returns the result and the report (see DESIGN)."""
+    from engine.collide.bvh import MeshBVH, ObjectSpaceCollider, penetration_stats
+
+    progress = progress or (lambda *a: None)
+    if collision not in ("image", "object"):
+        raise InputError(f"collision '{collision}': use image or object")
+    if not (0.0005 <= texel <= 0.05):
+        raise InputError(f"texel {texel * 1000:.2f} mm is out of range (0.5 .. 50 mm)")
+    o = options or DrapeOptions(fabric=fabric)
+    o.fabric = fabric
+    get_fabric(fabric)
+    t_all = time.perf_counter()
+    progress("meshing", 0.0, "meshing the panels")
+    garment = build_garment(spec, h=h, place=place or spec_placement(spec, body.to_world), source=source)
+    plan = plan_maps(body, garment, texel, collision)
+    t0 = time.perf_counter()
+    progress("maps", 0.0, "rendering collision maps" if collision == "image" else "building the BVH")
+    if collision == "image":
+        from engine.collide.collider import MapCollider
+        from engine.collide.maps import render_body_maps
+
+        maps = render_body_maps(body, texel=texel, window=plan.window, segments=plan.segments,
+                                tol=o.params.tolerance)
+        collider = MapCollider(maps)
+        map_info = {"maps": maps.names, "texel_mm": texel * 1000,
+                    "size": [[int(a), int(b)] for a, b in maps.layout[:, :2]]}
+    else:
+        collider = ObjectSpaceCollider(body.vertices, body.faces, tolerance=o.params.tolerance)
+        map_info = {"maps": [], "bvh_triangles": int(len(body.faces))}
+    t_maps = time.perf_counter() - t0
+    res = sew_and_drape(garment, collider, o, progress)
+    bvh = MeshBVH(body.vertices, body.faces)
+    pen = penetration_stats(body.vertices, body.faces, res.positions, bvh=bvh)
+    iters = res.iterations["sewing"] + res.iterations["draping"]
+    tc, tk = res.timing["cloth_total"], res.timing["collision_total"]
+    fab = get_fabric(fabric)
+    report = {
+        "body": body.name, "garment": source, "fabric": fabric, "collision": collision,
+        "cloth_vertices": int(len(res.positions)),
+        "cloth_vertices_unsewn": int(garment.n_vertices),
+        "iterations": int(iters),
+        "iterations_by_stage": res.iterations,
+        "dt_ms": res.dt * 1000, "dt_bound_ms": res.model.dt_bound * 1000,
+        "ms_per_iteration": {"cloth": 1000 * tc / max(iters, 1), "collision": 1000 * tk / max(iters, 1),
+                             "total": 1000 * (tc + tk) / max(iters, 1)},
+        "wall_seconds": {"maps": t_maps, "sewing": res.timing["sewing"], "draping": res.timing["draping"],
+                         "total": time.perf_counter() - t_all},
+        "penetration_mm": {"max": pen["max"] * 1000, "p99": pen["p99"] * 1000,
+                           "count_inside": int(pen["count_inside"])},
+        "strain": {"max": res.strain_max, "threshold": fab.strain_threshold},
+        "seam_gap_mm": {"max": res.seam_gap_max * 1000},
+        "kinetic_energy_j": res.kinetic_energy,
+        "settled": bool(res.settled),
+        "collision_maps": map_info,
+        "left_out": plan.left_out,
+        "warnings": garment.warnings,
+    }
+    return res, report
+
+
+def write_outputs(out: Path, body: Body, res: DrapeResult, report: dict, size: int = 700) -> list[Path]:
+    """scene.glb, garment.obj, front/side/back.png, report.json in `out`."""
+    from PIL import Image
+
+    from engine.io.export import write_obj, write_scene_glb
+    from engine.io.render import BODY_RGB, render_meshes
+
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [write_scene_glb(out / "scene.glb", body.vertices, body.faces, [("garment", res.positions, res.triangles)]),
+             write_obj(out / "garment.obj", res.positions, res.triangles)]
+    meshes = [(body.vertices, body.faces, BODY_RGB), (res.positions, res.triangles, (0.27, 0.43, 0.75))]
+    for view in ("front", "side", "back"):
+        p = out / f"{view}.png"
+        Image.fromarray(render_meshes(meshes, size=size, view=view)).save(p)
+        paths.append(p)
+    p = out / "report.json"
+    p.write_text(json.dumps(report, indent=2))
+    paths.append(p)
+    return paths
