@@ -52,10 +52,12 @@ def merge_map(n: int, pairs: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def pull_seams(x, v, mass, pairs, welded, tau, vmax):
+def pull_seams(x, v, mass, pairs, welded, tau, vmax, contact, contact_n):
     """Sewing as a velocity modification (in the spirit of seed 003 §4.3): each open seam pair
     gets the relative velocity that closes its gap in time tau (at most vmax), shared so the
-    pair's momentum is unchanged. Welded pairs are held by hold_welds instead."""
+    pair's momentum is unchanged. A seam end lying on the body is not pulled into it: the part
+    of its pull along the contact normal, if inward, is dropped, so pairs on either side of a
+    shoulder slide over it instead of pressing into it. Welded pairs are held by hold_welds."""
     for k in range(pairs.shape[0]):
         if welded[k]:
             continue
@@ -75,9 +77,13 @@ def pull_seams(x, v, mass, pairs, welded, tau, vmax):
         if closing >= speed:
             continue
         dv = speed - closing
-        v[a, 0] += wa * dv * ux
-        v[a, 1] += wa * dv * uy
-        v[a, 2] += wa * dv * uz
-        v[b, 0] -= wb * dv * ux
-        v[b, 1] -= wb * dv * uy
-        v[b, 2] -= wb * dv * uz
+        for end, sgn, w in ((a, 1.0, wa), (b, -1.0, wb)):
+            px, py, pz = sgn * w * dv * ux, sgn * w * dv * uy, sgn * w * dv * uz
+            if contact[end]:
+                nx, ny, nz = contact_n[end, 0], contact_n[end, 1], contact_n[end, 2]
+                pn = px * nx + py * ny + pz * nz
+                if pn < 0.0:
+                    px, py, pz = px - pn * nx, py - pn * ny, pz - pn * nz
+            v[end, 0] += px
+            v[end, 1] += py
+            v[end, 2] += pz

@@ -31,12 +31,12 @@ class DrapeOptions:
     dt: float | None = None  # None: the eq. 4 bound
     force_dt: bool = False
     params: ClothParams = field(default_factory=ClothParams)
-    weld_gap: float = 0.003  # m: a seam pair this close is welded
+    weld_gap: float | None = None  # m: a seam pair this close is welded (None: half the cloth edge)
     sew_tau: float = 0.02  # s: a seam pair is pulled to close its gap in this time ...
     sew_vmax: float = 3.0  # m/s: ... at most this fast
     sew_damping: float = 20.0  # x the viscous damping while sewing (no flapping)
-    sew_friction: float = 1.0  # x the fabric's friction while sewing
-    sew_gravity: float = 0.0  # x gravity while sewing (a flared skirt without gravity opens into a disc)
+    sew_friction: float = 0.0  # x the fabric's friction while sewing
+    sew_gravity: float = 1.0  # x gravity while sewing (a flared skirt without gravity opens into a disc)
     drape_damping: float = 250.0  # x the viscous damping while draping (a static result: settle)
     gravity_ramp: float = 0.3  # s: gravity grows from 0 to g over this long (no jolt when it starts)
     sew_budget: float = 3.0  # s of simulated time
@@ -86,17 +86,20 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
         welded = np.zeros(len(pairs), dtype=np.bool_)
         gaps = np.zeros(len(pairs))
         budget = int(np.ceil(o.sew_budget / dt))
+        weld_gap = o.weld_gap if o.weld_gap is not None else 0.5 * _edge(garment)
         gap0 = float(seam_gaps(state.x, pairs, gaps).max())
         check_every = max(1, int(0.005 / dt))
         solver.strain_guard = None  # sewing stretches cloth by design; the guard and the strain
         solver.recover = 1e9  # recovery are for the drape (a new solver is made after welding)
         for it in range(budget):
-            pull_seams(state.x, state.v, model.mass, pairs, welded, o.sew_tau, o.sew_vmax)
-            solver.step(state, gravity_scale=o.sew_gravity, damping_scale=o.sew_damping, friction_scale=o.sew_friction)
+            pull_seams(state.x, state.v, model.mass, pairs, welded, o.sew_tau, o.sew_vmax, solver.contact,
+                       solver.contact_n)
+            g = o.sew_gravity * min(1.0, (it + 1) * dt / o.gravity_ramp)  # let the seams catch first
+            solver.step(state, gravity_scale=g, damping_scale=o.sew_damping, friction_scale=o.sew_friction)
             hold_welds(state.x, state.v, model.mass, pairs, welded)
             if it % check_every == 0:
                 seam_gaps(state.x, pairs, gaps)
-                welded |= gaps < o.weld_gap
+                welded |= gaps < weld_gap
                 _check_finite(state, "sewing")
                 if welded.all():
                     break
