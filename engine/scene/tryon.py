@@ -54,8 +54,12 @@ def plan_maps(body: Body, garment: Garment, texel: float, collision: str) -> Try
             segs = [s for s in segs if "arm" not in s]
             left.append(f"arm maps, because the garment stays below the arms (top {top:.2f} m, "
                         f"armpits {armpit:.2f} m)")
+        head = body.segments == SEGMENTS.index("head")
+        if head.any() and top + 0.05 > float(body.vertices[head, 1].min()):
+            segs = ["head"] + segs  # the head segment holds the neck, where necklines sit
+        else:
+            left.append("head maps, because the garment stays below the neck")
         segments = segs
-        left.append("head maps, because garments do not reach the head")
     return TryOnPlan(texel, window, segments, left)
 
 
