@@ -145,7 +145,7 @@ def drape_cmd(
     body: str = typer.Option(..., "--body", help=BODY_HELP),
     garment: str = typer.Option(..., "--garment", help="A catalogue garment (see `tryon garments`) or a "
                                 "GarmentCode pattern file (.json)."),
-    size: str = typer.Option("M", "--size", help="Catalogue size: XS, S, M, L, XL, XXL."),
+    size: Optional[str] = typer.Option(None, "--size", help="Catalogue size: XS, S, M, L, XL, XXL (default M)."),
     fabric: str = typer.Option("cotton", "--fabric", help="cotton, denim, silk or jersey."),
     out: Path = typer.Option(Path("out/drape"), "--out", help="Output directory."),
     resolution: float = typer.Option(1.5, "--resolution", help="Cloth edge length in cm."),
@@ -202,6 +202,21 @@ def drape_cmd(
                    f"penetration max {r['penetration_mm']['max']:.1f} mm p99 {r['penetration_mm']['p99']:.1f} mm; "
                    f"strain max {100 * r['strain']['max']:.1f} % (threshold {100 * r['strain']['threshold']:.0f} %); "
                    f"settled: {r['settled']}")
+
+    _run(go)
+
+
+@app.command("garments")
+def garments_cmd():
+    """List the catalogue garments (names for `tryon drape --garment`), with their sizes."""
+
+    def go():
+        from engine.pattern.catalogue import CATALOGUE, SIZES
+
+        width = max(len(n) for n in CATALOGUE)
+        for name, (_, description) in CATALOGUE.items():
+            typer.echo(f"{name:<{width}}  {description}")
+        typer.echo(f"sizes: {', '.join(SIZES)} (--size; women's or men's chart from the body)")
 
     _run(go)
 

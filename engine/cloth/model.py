@@ -14,7 +14,8 @@ springs, and the single-spring reading of eq. 4 measured unstable here -- see
 tests/test_cloth.py).
 Eq. 4 assumes equal point masses; lumped masses along a clipped outline can be much smaller
 (sliver triangles), so every point gets at least MASS_FLOOR x the median mass -- a fraction
-of a percent of the garment's weight -- rather than letting slivers dictate the step.
+of the garment's weight (measured: +1.2 % on the sample skirt at 1.5 cm, +2.4 % at 3 cm) --
+rather than letting slivers dictate the step.
 """
 
 from __future__ import annotations
@@ -135,11 +136,13 @@ def lumped_mass(uv: np.ndarray, quads: np.ndarray, tris: np.ndarray, density: fl
     m = np.zeros(len(uv))
     if len(quads):
         a = uv[quads]
-        area = 0.5 * np.abs(np.cross(a[:, 2] - a[:, 0], a[:, 3] - a[:, 1]))
+        d1, d2 = a[:, 2] - a[:, 0], a[:, 3] - a[:, 1]
+        area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
         np.add.at(m, quads.ravel(), np.repeat(area / 4.0, 4))
     if len(tris):
         a = uv[tris]
-        area = 0.5 * np.abs(np.cross(a[:, 1] - a[:, 0], a[:, 2] - a[:, 0]))
+        d1, d2 = a[:, 1] - a[:, 0], a[:, 2] - a[:, 0]
+        area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
         np.add.at(m, tris.ravel(), np.repeat(area / 3.0, 3))
     return m * density
 

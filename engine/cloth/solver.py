@@ -42,7 +42,7 @@ class ClothSolver:
         if dt > model.dt_bound * (1 + 1e-9) and not force_dt:
             raise InputError(f"time step {dt * 1e3:.3f} ms exceeds the stability bound of eq. 4 "
                              f"({model.dt_bound * 1e3:.3f} ms for this fabric and mesh); use a smaller one "
-                             "or force it")
+                             "or force it (--force-dt)")
         self.model, self.collider, self.dt = model, collider, float(dt)
         self.gravity = np.asarray(gravity, dtype=np.float64)
         p = model.params

@@ -22,9 +22,12 @@ CLEARANCE = 0.02  # m between the body and a freshly placed panel
 
 
 class BodySections:
-    """Ellipses (centre x, z; semi-axes a, b) of the body without its arms, every 1 cm."""
+    """Ellipses (centre x, z; semi-axes a, b) of the body without its arms, every 1 cm.
+    cover: grow each ellipse until it contains the whole cut (fewer panel points start inside
+    the body, at the price of side seams that start further apart); else the ellipse inscribed
+    in the cut's bounding box."""
 
-    def __init__(self, body: Body):
+    def __init__(self, body: Body, cover: bool = False):
         v, f = body.vertices, body.faces
         if body.segments is not None:
             keep_seg = np.isin(body.segments, [SEGMENTS.index(s) for s in ("torso", "left_leg", "right_leg")])
@@ -38,8 +41,11 @@ class BodySections:
             if not pts:
                 continue
             p = np.concatenate(pts)
-            lo, hi = p.min(axis=0), p.max(axis=0)
-            ell[k] = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (hi[0] - lo[0]) / 2, (hi[1] - lo[1]) / 2]
+            if cover:
+                ell[k] = _covering_ellipse(p)
+            else:
+                lo, hi = p.min(axis=0), p.max(axis=0)
+                ell[k] = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (hi[0] - lo[0]) / 2, (hi[1] - lo[1]) / 2]
         ok = np.isfinite(ell[:, 0])
         if ok.sum() < 10:
             raise InputError("could not find the body's cross-sections to place the garment")
@@ -50,6 +56,17 @@ class BodySections:
     def at(self, y: np.ndarray) -> np.ndarray:
         """(len(y), 4) ellipses at heights y."""
         return np.stack([np.interp(y, self.ys, self.ell[:, c]) for c in range(4)], axis=1)
+
+
+def _covering_ellipse(p: np.ndarray) -> list[float]:
+    """(cx, cz, a, b) of the ellipse centred on the bounding box of the (K, 2) points, with its
+    axes' ratio, grown until it contains every point (the box's own inscribed ellipse cuts the
+    corners off: the front of both thighs, the shoulder blades)."""
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    c = (lo + hi) / 2
+    a, b = max((hi[0] - lo[0]) / 2, 1e-3), max((hi[1] - lo[1]) / 2, 1e-3)
+    k = max(1.0, float(np.sqrt((((p[:, 0] - c[0]) / a) ** 2 + ((p[:, 1] - c[1]) / b) ** 2).max())))
+    return [c[0], c[1], a * k, b * k]
 
 
 def _ellipse_point(a: float, b: float, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -137,3 +154,187 @@ def panel_outline_2d(panel: Panel, scale: float) -> np.ndarray:
     from engine.pattern import geometry as geo
 
     return geo.outline(panel, scale)
+
+
+# ------------------------------------------------------------------ sleeves on a bent arm
+
+
+def arm_path(points: np.ndarray, step: float = 0.005, smooth: float = 0.06) -> np.ndarray:
+    """(K, 3) arm axis polyline (cap start, elbow, wrist) -> (M, 3) points every `step` metres,
+    smoothed over `smooth` metres so that a sleeve wrapped around it has no crease at the elbow.
+    The path is extended 15 cm beyond both ends (straight) so every sleeve point finds its ring."""
+    p = np.asarray(points, dtype=np.float64)
+    d0 = (p[1] - p[0]) / np.linalg.norm(p[1] - p[0])
+    d1 = (p[-1] - p[-2]) / np.linalg.norm(p[-1] - p[-2])
+    ext = np.concatenate([[p[0] - 0.15 * d0], p, [p[-1] + 0.15 * d1]])
+    seg = np.linalg.norm(np.diff(ext, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    t = np.arange(0.0, s[-1], step)
+    dense = np.stack([np.interp(t, s, ext[:, c]) for c in range(3)], axis=1)
+    k = max(1, int(round(smooth / step / 2)))
+    pad = np.concatenate([np.repeat(dense[:1], k, 0), dense, np.repeat(dense[-1:], k, 0)])
+    kern = np.ones(2 * k + 1) / (2 * k + 1)
+    sm = np.stack([np.convolve(pad[:, c], kern, mode="valid") for c in range(3)], axis=1)
+    # keep the original start (the cap top is placed relative to it)
+    return sm - sm[int(round(0.15 / step))] + p[0]
+
+
+def _arm_frames(path: np.ndarray, origin: int):
+    """Arc length (0 at path[origin]), unit tangents, 'up' and 'front' vectors per path point."""
+    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    s -= s[origin]
+    tan = np.gradient(path, axis=0)
+    tan /= np.linalg.norm(tan, axis=1, keepdims=True)
+    up = np.array([0.0, 1.0, 0.0])[None] - tan[:, 1:2] * tan
+    up /= np.linalg.norm(up, axis=1, keepdims=True)
+    fwd = np.cross(tan, up)
+    fwd *= np.where(fwd[:, 2:3] < 0, -1.0, 1.0)  # u > 0 toward the front (+z) for both arms
+    return s, tan, up, fwd
+
+
+def arm_centre_line(arm_vertices: np.ndarray, joints: np.ndarray, band: float = 0.03) -> np.ndarray:
+    """(K, 3) centres of the arm's surface in bands across the joint path (upper arm joint,
+    elbow, wrist) from 6 cm below the upper arm joint to the wrist: the joints of a rig sit
+    off the middle of the arm (the shoulder joint inside the deltoid)."""
+    from scipy.spatial import cKDTree
+
+    path = arm_path(joints)
+    origin = int(round(0.15 / 0.005))
+    s, _, _, _ = _arm_frames(path, origin)
+    s_wrist = float(s[int(np.argmin(np.linalg.norm(path - joints[-1], axis=1)))])
+    _, i = cKDTree(path).query(arm_vertices)
+    sv = s[i]
+    out = []
+    for b0 in np.arange(0.06, s_wrist - band / 2, band):
+        sel = (sv >= b0) & (sv < b0 + band)
+        if sel.sum() >= 8:
+            out.append(arm_vertices[sel].mean(axis=0))
+    out.append(joints[-1])
+    return np.array(out)
+
+
+def arm_radius_profile(arm_vertices: np.ndarray, path: np.ndarray, origin: int,
+                       s_query: np.ndarray, s_end: float) -> np.ndarray:
+    """90th percentile distance of the arm's vertices from the path in 2 cm bands of arc
+    length (0 at path[origin]), hand (beyond s_end) excluded, at arc lengths s_query."""
+    from scipy.spatial import cKDTree
+
+    s, _, _, _ = _arm_frames(path, origin)
+    d, i = cKDTree(path).query(arm_vertices)
+    keep = s[i] <= s_end - 0.03  # the wrist bands run into the palm
+    d, band = d[keep], np.round(s[i][keep] / 0.02).astype(int)
+    keys = np.unique(band)
+    rmax = np.array([np.percentile(d[band == k], 90) for k in keys])
+    return np.interp(s_query, keys * 0.02, rmax)
+
+
+def wrap_sleeve(uv: np.ndarray, path: np.ndarray, origin: int, radius: np.ndarray) -> np.ndarray:
+    """wrap_arm on a bent arm: (n, 2) sleeve points (v = 0 at the cap top, negative toward the
+    cuff; u around the arm, u = 0 on top, u > 0 toward the front) -> (n, 3) on tubes around the
+    smoothed axis `path` (from arm_path), whose point `origin` is at v = 0; radius: (n,) the tube
+    radius at each point (m). The underarm seam (u = +-half the width) lies under the arm."""
+    s, tan, up, fwd = _arm_frames(path, origin)
+    along = np.clip(-uv[:, 1], s[0], s[-1])
+    idx = np.clip(np.searchsorted(s, along) - 1, 0, len(s) - 2)
+    w = ((along - s[idx]) / np.maximum(s[idx + 1] - s[idx], 1e-12))[:, None]
+    centre = (1 - w) * path[idx] + w * path[idx + 1]
+    u_ = (1 - w) * up[idx] + w * up[idx + 1]
+    f_ = (1 - w) * fwd[idx] + w * fwd[idx + 1]
+    theta = (uv[:, 0] / radius)[:, None]
+    return centre + radius[:, None] * (np.cos(theta) * u_ + np.sin(theta) * f_)
+
+
+# ------------------------------------------------------------------ trousers
+
+
+class LegSections:
+    """Per-leg ellipses (centre x, z; semi-axes a, b) every 1 cm: below the crotch the cut of
+    each leg, above it the body's half (x > 0 for the left leg, x < 0 for the right) of the
+    torso cut, so a trouser leg's tube continues smoothly into the seat."""
+
+    def __init__(self, body: Body):
+        v, f = body.vertices, body.faces
+        if body.segments is not None:
+            keep_seg = np.isin(body.segments, [SEGMENTS.index(s) for s in ("torso", "left_leg", "right_leg")])
+            f = f[keep_seg[f].all(axis=1)]
+        self.ys = np.arange(0.02, float(v[:, 1].max()) * 0.7, 0.01)
+        cuts = slice_stack(v, f, self.ys)
+        ell = {1: np.full((len(self.ys), 4), np.nan), -1: np.full((len(self.ys), 4), np.nan)}
+        for k, pieces in enumerate(cuts):
+            central = [p for p in pieces if p.xmin < 0.0 < p.xmax]
+            for s in (1, -1):
+                if central:
+                    c = max(central, key=lambda p: p.length).points
+                    pts = c[s * c[:, 0] >= 0]
+                    if len(pts) < 3:
+                        continue
+                    pts = np.concatenate([pts, [[0.0, pts[:, 1].min()], [0.0, pts[:, 1].max()]]])
+                else:
+                    side = [p for p in pieces if s * p.centroid[0] > 0]
+                    if not side:
+                        continue
+                    pts = max(side, key=lambda p: p.length).points
+                ell[s][k] = _covering_ellipse(pts)
+        for s in (1, -1):
+            ok = np.isfinite(ell[s][:, 0])
+            if ok.sum() < 10:
+                raise InputError("could not find the body's legs to place the trousers")
+            for c in range(4):
+                ell[s][:, c] = np.interp(self.ys, self.ys[ok], ell[s][ok, c])
+        self.ell = ell
+
+    def at(self, y: np.ndarray, s: int) -> np.ndarray:
+        return np.stack([np.interp(y, self.ys, self.ell[s][:, c]) for c in range(4)], axis=1)
+
+
+def wrap_trousers(uv: np.ndarray, side: str, leg: int, top_y: float, crotch_y: float, crease: float,
+                  torso: BodySections, legs: LegSections, half_girth, leg_girth,
+                  blend: float = 0.10) -> np.ndarray:
+    """(n, 2) trouser panel points (metres; v = 0 at the waist, u -> world x, u = 0 on the
+    centre front/back line) -> (n, 3). side: 'front'/'back'; leg: +1 body's left (x > 0), -1
+    right; crotch_y: height of the garment's crotch point; crease: u of the leg's crease line.
+    half_girth(v) / leg_girth(v): the garment's girth over front + back (one side of the body /
+    one leg) at panel height v, to widen the ellipses where the garment is looser.
+
+    Above crotch_y + blend the panel wraps the torso's ellipse by arc length from the centre
+    line (the crotch extension, past the centre, is folded onto it and stands off a little);
+    below crotch_y it wraps its own leg's ellipse by arc length from the crease line; in
+    between the two are blended, heights squeezed toward the crotch so rows never fold."""
+    u, v = uv[:, 0], uv[:, 1]
+    y = top_y + v
+    sg = 1.0 if side == "front" else -1.0
+    rows = np.round(v / 0.01).astype(int)
+    p_t = np.zeros((len(uv), 3))
+    p_l = np.zeros((len(uv), 3))
+    for r in np.unique(rows):
+        sel = rows == r
+        vr = r * 0.01
+        yr = top_y + vr
+        # torso
+        cx, cz, a, b = torso.at(np.array([max(yr, crotch_y)]))[0]
+        a, b = a + CLEARANCE, b + CLEARANCE
+        k = max(1.0, half_girth(vr) / _half_perimeter(a, b))
+        a, b = a * k, b * k
+        t = leg * u[sel]  # toward the outseam; < 0 in the crotch extension
+        sn, cs = _ellipse_point(a, b, leg * np.maximum(t, 0.0))
+        stand = 0.5 * np.maximum(-t, 0.0)
+        p_t[sel, 0] = cx + (a + stand) * sn
+        p_t[sel, 1] = y[sel]
+        p_t[sel, 2] = cz + sg * (b + stand) * cs
+        # leg
+        yl = min(yr, crotch_y)
+        cx, cz, a, b = legs.at(np.array([yl]), leg)[0]
+        a, b = a + CLEARANCE, b + CLEARANCE
+        k = max(1.0, leg_girth(min(vr, crotch_y - top_y)) / (2 * _half_perimeter(a, b)))
+        a, b = a * k, b * k
+        sn, cs = _ellipse_point(a, b, u[sel] - crease)
+        p_l[sel, 0] = cx + a * sn
+        p_l[sel, 1] = np.minimum(y[sel], crotch_y)
+        p_l[sel, 2] = cz + sg * b * cs
+    g = np.clip((y - crotch_y) / blend, 0.0, 1.0)[:, None]  # 0 at the crotch, 1 above the blend
+    out = g * p_t + (1 - g) * p_l
+    # heights: y_c + blend * g^2 in the blend zone (monotone, no folded rows)
+    zone = (y > crotch_y) & (y < crotch_y + blend)
+    out[zone, 1] = crotch_y + blend * g[zone, 0] ** 2
+    return out

@@ -94,8 +94,23 @@ class Made:
     spec: PatternSpec
     tops: dict[str, float]  # panel -> world height of its v = 0 line (m)
     hints: dict[str, PanelHint]
-    sleeve_axes: dict[str, tuple[np.ndarray, np.ndarray, float]]  # panel -> (shoulder, wrist, radius)
+    sleeve_axes: dict[str, "SleevePlan"]  # sleeve panel -> where it goes on the arm
     clamp_y: float | None
+    legs: dict[str, "LegPlan"] | None = None  # trouser panel -> its leg (trousers only)
+
+
+@dataclass
+class SleevePlan:
+    side: str  # 'left' (body's left, +x) or 'right'
+    cap_top: np.ndarray  # (3,) world point (m) where the top of the cap goes (the shoulder point)
+    joints: np.ndarray  # (3, 3) upper arm, elbow, wrist joints (m)
+
+
+@dataclass
+class LegPlan:
+    leg: int  # +1 body's left (x > 0), -1 right
+    crease: float  # u (m) of the leg's crease line in the panel frame
+    crotch_y: float  # world height (m) of the garment's crotch point
 
 
 def _stitch(stitches, pa, ea, pb, eb):
@@ -126,6 +141,10 @@ class Fit:
     knee_h: float
     shoulder_w: float
     armpit_h: float
+    # the body's arm joints when it has a rig: side ('left' = +x) -> (3, 3) world points (m) of
+    # the upper arm, elbow and wrist joints; None for scans
+    arms: dict[str, np.ndarray] | None = None
+    men: bool = False
 
 
 def _fit(body: Body, size: str) -> Fit:
@@ -145,7 +164,28 @@ def _fit(body: Body, size: str) -> Fit:
     sw = m.shoulder_width if np.isfinite(m.shoulder_width) else 0.21 * m.height
     return Fit(bust, waist, hips, 100 * m.height, 100 * m.shoulder_height, 100 * m.waist_height,
                100 * m.hip_height, 100 * m.crotch_height, 100 * m.knee_height, 100 * sw,
-               100 * (m.shoulder_height - 0.12 * m.height))
+               100 * (m.shoulder_height - 0.12 * m.height), _arm_joints(body), chart is MEN)
+
+
+ARM_JOINTS = (("upperarm01", "shoulder01"), ("lowerarm01",), ("wrist",))
+
+
+def _arm_joints(body: Body) -> dict[str, np.ndarray] | None:
+    """Upper arm, elbow and wrist joint positions of each arm from the rig (None without one)."""
+    rig = body.rig
+    if rig is None:
+        return None
+    names = {n: i for i, n in enumerate(rig.joint_names)}
+    out = {}
+    for side, suffix in (("left", ".L"), ("right", ".R")):
+        pts = []
+        for options in ARM_JOINTS:
+            j = next((names[o + suffix] for o in options if o + suffix in names), None)
+            if j is None:
+                return None
+            pts.append(np.asarray(rig.rest_transforms[j][:3, 3], dtype=np.float64))
+        out[side] = np.array(pts)
+    return out
 
 
 # ------------------------------------------------------------------ garments
@@ -172,11 +212,13 @@ def skirt(f: Fit) -> Made:
 
 
 def _bodice(f: Fit, length: float, bust_ease: float, waist_ease: float | None, hip_ease: float,
-            flare: float, neck_front: float) -> tuple[Outline, Outline, dict]:
+            flare: float, neck_front: float, shoulder: float = -1.0) -> tuple[Outline, Outline, dict]:
     """Front and back bodice outlines (the front neckline deeper), v = 0 at the neck point;
-    side seams split at the underarm, waist and hip levels that lie above the hem."""
+    side seams split at the underarm, waist and hip levels that lie above the hem.
+    shoulder: where the shoulder seam ends, cm beyond the shoulder point (-1: a strap inside it,
+    off the deltoid; a sleeved bodice reaches the arm)."""
     nw = 0.045 * f.height
-    sw = f.shoulder_w / 2 - 1.0  # strap ends inside the shoulder point (off the deltoid)
+    sw = f.shoulder_w / 2 + shoulder
     slope = 4.0
     ad = f.shoulder_h + slope - f.armpit_h  # armhole depth below the neck point
     wb = (f.bust + bust_ease) / 4
@@ -209,8 +251,8 @@ def _bodice(f: Fit, length: float, bust_ease: float, waist_ease: float | None, h
 
 
 def _torso_garment(f: Fit, length: float, bust_ease: float, waist_ease, hip_ease: float, flare: float,
-                   neck_front: float):
-    fo, bo, info = _bodice(f, length, bust_ease, waist_ease, hip_ease, flare, neck_front)
+                   neck_front: float, shoulder: float = -1.0):
+    fo, bo, info = _bodice(f, length, bust_ease, waist_ease, hip_ease, flare, neck_front, shoulder)
     front, fi = fo.panel()
     back, bi = bo.panel(reverse=True)
     st = []
@@ -238,10 +280,133 @@ def dress(f: Fit) -> Made:
     return Made(_spec(panels, st, hints), {"front": top, "back": top}, hints, {}, f.armpit_h / 100)
 
 
+def _sleeve_outline(width: float, cuff: float, length: float, cap: float) -> Outline:
+    """One-piece sleeve (cm): cap top at (0, 0), u around the arm (u > 0 the front half), the
+    underarm seam split into its front and back edges, cuff at v = -length."""
+    hw, hc = width / 2, cuff / 2
+    return (Outline((0, 0)).curve((-0.55 * hw, -0.08 * cap), (-hw, -cap), "cap_b")
+            .line((-hc, -length), "seam_b").line((hc, -length), "cuff").line((hw, -cap), "seam_f")
+            .close("cap_f", ctrl=(0.55 * hw, -0.08 * cap)))
+
+
+def _cap_height(width: float, cuff: float, length: float, target: float) -> float:
+    """Cap height (cm) whose cap half is `target` cm long (bisection on the built panel)."""
+    scale = 0.01
+
+    def half(cap):
+        panel, idx = _sleeve_outline(width, cuff, length, cap).panel()
+        p = PatternSpec.model_validate({"pattern": {"panels": {"s": panel}, "stitches": []},
+                                        "properties": {"units_in_meter": 100, "curvature_coords": "relative"}})
+        pan = p.pattern.panels["s"]
+        return geo.edge_length(pan, pan.edges[idx["cap_f"]], scale) * 100
+
+    lo, hi = 1.0, 0.6 * length
+    if half(lo) > target:
+        raise InputError(f"the sleeve ({width:.0f} cm wide) is too wide for the armhole ({target:.0f} cm): "
+                         "choose a larger size")
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        if half(mid) < target:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def shirt(f: Fit) -> Made:
+    """Shirt with long sleeves: the sleeveless bodice with its shoulders out to the shoulder
+    points, plus one-piece sleeves whose caps are sewn into the armholes."""
+    if f.arms is None:
+        raise InputError("sleeved garments need the body's arm axes, which come from a skeleton: this body "
+                         "has none (a scan); use the default body, or the sleeveless-shirt")
+    length = f.shoulder_h + 4 - f.hip_h + 6
+    shoulder = 1.0  # the shoulder seam ends 1 cm past the shoulder point, on the arm
+    panels, st, hints, fi, bi, top = _torso_garment(f, length, 10, None, 8, 1.0, 9.0, shoulder)
+    spec0 = _spec(dict(panels), [], {})
+    front = spec0.pattern.panels["front"]
+    armhole = geo.edge_length(front, front.edges[fi["arm_r"]], 0.01) * 100
+    back = spec0.pattern.panels["back"]
+    armhole = max(armhole, geo.edge_length(back, back.edges[bi["arm_r"]], 0.01) * 100)
+    width = 0.31 * f.bust + 8  # bicep girth + ease
+    cuff = 26.0 if f.men else 24.0
+    sw = f.shoulder_w / 2 + shoulder
+    axes = {}
+    for side, sgn in (("left", 1.0), ("right", -1.0)):
+        j = f.arms[side]
+        cap_top = np.array([sgn * sw / 100, f.shoulder_h / 100 + 0.01, j[0, 2]])
+        d1 = (j[1] - j[0]) / np.linalg.norm(j[1] - j[0])
+        arm_len = 100 * (abs(float((j[1] - cap_top) @ d1)) + float(np.linalg.norm(j[2] - j[1])))
+        axes[f"sleeve_{side[0]}"] = (side, cap_top, j, arm_len)
+    length_s = max(a[3] for a in axes.values()) + 2.0  # to just past the wrist
+    cap = _cap_height(width, cuff, length_s, 1.025 * armhole)
+    o = _sleeve_outline(width, cuff, length_s, cap)
+    plans = {}
+    for name, (side, cap_top, j, _) in axes.items():
+        # wrap_sleeve puts u > 0 at the front of either arm; on the body's left arm that makes a
+        # counter-clockwise panel face the arm, so that sleeve is drawn clockwise
+        panels[name], idx = o.panel(reverse=(side == "left"))
+        arm = "arm_r" if side == "left" else "arm_l"  # body's left = u > 0 side of the bodice
+        _stitch(st, name, idx["cap_f"], "front", fi[arm])
+        _stitch(st, name, idx["cap_b"], "back", bi[arm])
+        _stitch(st, name, idx["seam_f"], name, idx["seam_b"])
+        hints[name] = PanelHint(region=f"{side}_arm", side="around")
+        plans[name] = SleevePlan(side, cap_top, j)
+    tops = {"front": top, "back": top, **{n: 0.0 for n in plans}}
+    return Made(_spec(panels, st, hints), tops, hints, plans, f.armpit_h / 100)
+
+
+def trousers(f: Fit) -> Made:
+    """Trousers, four panels (front and back of each leg), waist to the ankle, with crotch
+    extensions (front 1/16, back 1/8 of the hip girth) and the legs centred on crease lines."""
+    H, W = f.hips + 6, f.waist + 2
+    d_hip = f.waist_h - f.hip_h
+    d_cr = f.waist_h - f.crotch_h + 2  # crotch point 2 cm below the body's
+    d_hip = min(d_hip, d_cr - 6)
+    d_knee = f.waist_h - f.knee_h
+    length = f.waist_h - 3  # hem 3 cm above the floor
+    hem = float(np.clip(40 + 0.1 * (H - 96), 40, 44))  # full hem opening
+    knee = hem + 6
+    parts = {}
+    for side, dw, ext in (("front", -1.0, H / 16), ("back", 1.0, H / 8)):
+        wq, hq = W / 4 + dw, H / 4 + dw  # front a little narrower than the back
+        crease = (hq - ext) / 2
+        kq, mq = (knee / 2 + 2 * dw) / 2, (hem / 2 + 2 * dw) / 2  # half widths at knee / hem
+        top_cf = d_cr - 1.2 * ext if side == "front" else d_cr - 1.1 * ext
+        parts[side] = (wq, hq, ext, crease, kq, mq, top_cf)
+    panels, st, hints, legs, idx = {}, [], {}, {}, {}
+    for side, (wq, hq, ext, crease, kq, mq, top_cf) in parts.items():
+        for leg, lname in ((1, "l"), (-1, "r")):
+            def P(u, v, leg=leg):
+                return (leg * u, v)
+
+            o = (Outline(P(0, 0)).line(P(0, -top_cf), "centre")
+                 .curve(P(0, -d_cr + 0.1 * ext), P(-ext, -d_cr), "crotch")
+                 .line(P(crease - kq, -d_knee), "inseam1").line(P(crease - mq, -length), "inseam2")
+                 .line(P(crease + mq, -length), "hem").line(P(crease + kq, -d_knee), "outseam2")
+                 .line(P(hq, -d_hip), "outseam1").curve(P(hq, -0.5 * d_hip), P(wq, 0), "hipline")
+                 .close("waist"))
+            # the left panels' outline runs counter-clockwise; mirrored (right) it runs clockwise
+            ccw = leg == 1
+            name = f"{side}_{lname}"
+            panels[name], idx[name] = o.panel(reverse=(ccw if side == "back" else not ccw))
+            hints[name] = PanelHint(region="left_leg" if leg == 1 else "right_leg", side=side)
+            legs[name] = LegPlan(leg, leg * crease / 100, (f.waist_h - d_cr) / 100)
+    for lname in ("l", "r"):
+        for e in ("hipline", "outseam1", "outseam2", "inseam1", "inseam2"):
+            _stitch(st, f"front_{lname}", idx[f"front_{lname}"][e], f"back_{lname}", idx[f"back_{lname}"][e])
+    for side in ("front", "back"):
+        for e in ("centre", "crotch"):
+            _stitch(st, f"{side}_l", idx[f"{side}_l"][e], f"{side}_r", idx[f"{side}_r"][e])
+    tops = {n: f.waist_h for n in panels}
+    return Made(_spec(panels, st, hints), tops, hints, {}, None, legs)
+
+
 CATALOGUE = {
     "skirt": (skirt, "A-line skirt, 2 panels, waist to knee"),
     "sleeveless-shirt": (sleeveless_shirt, "sleeveless shirt, 2 panels, shoulders to hips"),
     "dress": (dress, "sleeveless A-line dress, 2 panels, shoulders to knee"),
+    "shirt": (shirt, "shirt with long sleeves, 4 panels (bodice front/back, 2 sleeves), shoulders to hips"),
+    "trousers": (trousers, "trousers, 4 panels (front/back of each leg), waist to ankle"),
 }
 
 
@@ -252,12 +417,115 @@ def make_garment(name: str, body: Body, size: str = "M"):
     if name not in CATALOGUE:
         raise InputError(f"unknown garment '{name}'; the catalogue has: {', '.join(CATALOGUE)}")
     made = CATALOGUE[name][0](_fit(body, size))
-    sections = BodySections(body)
+    sections = BodySections(body, cover=name in ("shirt", "trousers"))
     scale = made.spec.scale
     outlines = {n: geo.outline(p, scale) for n, p in made.spec.pattern.panels.items()}
+    special = {n: _sleeve_placer(body, plan, outlines[n]) for n, plan in made.sleeve_axes.items()}
+    if made.legs:
+        special.update(_trouser_placers(body, made, sections, outlines))
 
     def place(pname, panel, uv):
+        if pname in special:
+            return special[pname](uv)
         hint = made.hints[pname]
         return wrap_torso(uv, hint, sections, made.tops[pname] / 100.0, outlines[pname], clamp_y=made.clamp_y)
 
     return made.spec, place, f"{name} ({size})"
+
+
+def _row_widths(outline: np.ndarray, vs: np.ndarray, u_min: float = -np.inf) -> np.ndarray:
+    """Width of a closed outline (M, 2) along horizontal lines at heights vs, counting only
+    u >= u_min."""
+    a, b = outline, np.roll(outline, -1, axis=0)
+    out = np.zeros(len(vs))
+    for k, v in enumerate(vs):
+        cross = (a[:, 1] - v) * (b[:, 1] - v) <= 0
+        if not cross.any():
+            continue
+        dy = np.where(b[cross, 1] != a[cross, 1], b[cross, 1] - a[cross, 1], 1.0)
+        t = np.clip((v - a[cross, 1]) / dy, 0, 1)
+        xs = a[cross, 0] + t * (b[cross, 0] - a[cross, 0])
+        out[k] = max(0.0, xs.max() - max(xs.min(), u_min))
+    return out
+
+
+def _sleeve_placer(body: Body, plan: SleevePlan, outline: np.ndarray):
+    """Placement of one sleeve: tubes around the arm's (smoothed, bent) axis, the cap top at the
+    shoulder point, radius max(the sleeve's width / 2 pi, the arm's radius + clearance)."""
+    from engine.body.types import SEGMENTS
+    from engine.garment.place import CLEARANCE, arm_centre_line, arm_path, arm_radius_profile, wrap_sleeve
+
+    j = plan.joints
+    if body.segments is not None:
+        arm_v = body.vertices[body.segments == SEGMENTS.index(f"{plan.side}_arm")]
+    else:
+        arm_v = None
+    vs = np.arange(float(outline[:, 1].min()) - 0.01, 0.011, 0.01)
+    widths = _row_widths(outline, vs)
+    cap_v = float(vs[int(np.argmax(widths))])  # the widest row: the underarm line
+    full = np.where(vs < cap_v, widths, widths.max())  # in the cap the tube is the underarm's
+
+    step = 0.005
+    origin = int(round(0.15 / step))
+    centres = arm_centre_line(arm_v, j) if arm_v is not None and len(arm_v) > 50 else j[1:]
+    d1 = centres[min(3, len(centres) - 2)] - centres[0]
+    d1 /= np.linalg.norm(d1)
+    up = np.array([0.0, 1.0, 0.0]) - d1[1] * d1
+    up /= np.linalg.norm(up)
+    path0 = arm_path(np.concatenate([[plan.cap_top], centres]), step)
+    s0 = _arc_to(path0, origin, j[2])
+
+    def radius_along(path, s, s_end):
+        # in the cap the arm's cut runs into the deltoid and the torso: use the underarm's
+        s = np.maximum(s, -cap_v)
+        r_w = np.interp(-s, vs, full) / (2 * np.pi)
+        if arm_v is None:
+            return np.maximum(r_w, 0.045 + CLEARANCE)
+        return np.maximum(r_w, arm_radius_profile(arm_v, path, origin, s, s_end) + CLEARANCE)
+
+    # the tube's top line runs through the shoulder point: start the axis one radius below it
+    r0 = float(radius_along(path0, np.array([0.0]), s0)[0])
+    start = plan.cap_top - r0 * up
+    path = arm_path(np.concatenate([[start], centres]), step)
+    r_rows = radius_along(path, -vs, _arc_to(path, origin, j[2]))
+    r_rows = np.convolve(np.pad(r_rows, 4, mode="edge"), np.ones(9) / 9, mode="valid")  # no bulges
+
+    def place(uv):
+        r = np.interp(uv[:, 1], vs, r_rows)
+        return wrap_sleeve(uv, path, origin, r)
+
+    return place
+
+
+def _arc_to(path: np.ndarray, origin: int, point: np.ndarray) -> float:
+    """Arc length along path (0 at path[origin]) of the path point nearest to point."""
+    seg = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+    return float(seg[int(np.argmin(np.linalg.norm(path - point, axis=1)))] - seg[origin])
+
+
+def _trouser_placers(body: Body, made: Made, sections, outlines):
+    from engine.garment.place import LegSections, wrap_trousers
+
+    legs = LegSections(body)
+    fl, bl = outlines["front_l"], outlines["back_l"]
+    vs = np.arange(float(min(fl[:, 1].min(), bl[:, 1].min())) - 0.01, 0.011, 0.01)
+    half = _row_widths(fl, vs, 0.0) + _row_widths(bl, vs, 0.0)
+    leg = _row_widths(fl, vs) + _row_widths(bl, vs)
+
+    def half_girth(v):
+        return float(np.interp(v, vs, half))
+
+    def leg_girth(v):
+        return float(np.interp(v, vs, leg))
+
+    out = {}
+    for n, plan in made.legs.items():
+        side = made.hints[n].side
+        top = made.tops[n] / 100.0
+
+        def place(uv, plan=plan, side=side, top=top):
+            return wrap_trousers(uv, side, plan.leg, top, plan.crotch_y, plan.crease, sections, legs,
+                                 half_girth, leg_girth)
+
+        out[n] = place
+    return out

@@ -95,7 +95,9 @@ def _check_panel(name: str, panel, scale: float, rel: bool) -> list[Problem]:
     poly = geo.outline(panel, scale, rel)
     if not np.all(np.isfinite(poly)):
         return [Problem("error", name, None, "outline has non-finite coordinates")]
-    crossing = _self_intersection(poly, len(edges))
+    seg_edge = np.concatenate([np.full(len(geo.edge_dense(panel, e, scale, rel, 64)) - 1, i)
+                               for i, e in enumerate(edges)])
+    crossing = _self_intersection(poly, seg_edge)
     if crossing is not None:
         i, j = crossing
         out.append(Problem("error", name, i, f"outline crosses itself (edge {i} crosses edge {j})"))
@@ -105,10 +107,10 @@ def _check_panel(name: str, panel, scale: float, rel: bool) -> list[Problem]:
     return out
 
 
-def _self_intersection(poly: np.ndarray, n_edges: int) -> tuple[int, int] | None:
-    """First pair of non-adjacent outline segments that properly cross, as (edge, edge)."""
+def _self_intersection(poly: np.ndarray, seg_edge: np.ndarray) -> tuple[int, int] | None:
+    """First pair of non-adjacent outline segments that properly cross, as (edge, edge);
+    seg_edge: (M,) the edge each outline segment belongs to."""
     m = len(poly)
-    per_edge = m // n_edges
     a, b = poly, np.roll(poly, -1, axis=0)
     # proper intersection of segments i and j via orientation tests, all pairs at once
     d1 = b - a
@@ -128,7 +130,7 @@ def _self_intersection(poly: np.ndarray, n_edges: int) -> tuple[int, int] | None
     if not hit.any():
         return None
     k = int(np.argmax(hit))
-    return int(i[k] // per_edge), int(j[k] // per_edge)
+    return int(seg_edge[i[k]]), int(seg_edge[j[k]])
 
 
 def check(spec: PatternSpec, source: str = "pattern") -> list[Problem]:

@@ -9,12 +9,17 @@ from engine.errors import InputError
 from engine.pattern.io import load_pattern
 
 
-def resolve_garment(arg: str, body: Body, size: str = "M"):
-    """Returns (PatternSpec, placement function or None for the spec's own, display name)."""
+def resolve_garment(arg: str, body: Body, size: str | None = "M"):
+    """Returns (PatternSpec, placement function or None for the spec's own, display name).
+    size: catalogue size; None means the default (M) for catalogue garments."""
     path = Path(arg)
     if path.suffix.lower() == ".json" or path.exists():
+        if size is not None:
+            raise InputError(f"--size {size} applies to catalogue garments; a pattern file ({path.name}) "
+                             "has its own size: leave --size out")
         spec = load_pattern(path)
         return spec, None, path.name
+    size = size or "M"
     try:
         from engine.pattern.catalogue import CATALOGUE, make_garment
     except ImportError:  # the catalogue is not built yet

@@ -77,6 +77,11 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
     o = options or DrapeOptions(fabric=fabric)
     o.fabric = fabric
     get_fabric(fabric)
+    from engine.cloth.kernels import VM_MODES
+
+    if o.params.velocity_mode not in VM_MODES:  # refuse before any meshing or rendering
+        raise InputError(f"unknown velocity modification '{o.params.velocity_mode}'; "
+                         f"choose one of: {', '.join(VM_MODES)}")
     t_all = time.perf_counter()
     progress("meshing", 0.0, "meshing the panels")
     garment = build_garment(spec, h=h, place=place or spec_placement(spec, body.to_world), source=source)

@@ -1,0 +1,300 @@
+"""The cloth model (springs, masses, eq. 4 time step), the solver's refusals and free fall, the
+velocity modification kernel, seam welding helpers and fabrics."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from engine.cloth import kernels as K
+from engine.cloth.fabrics import FABRICS, get_fabric
+from engine.cloth.model import (FLEXION, MASS_FLOOR, SHEAR, STRUCTURAL, ClothParams, ClothState, build_model,
+                               lumped_mass)
+from engine.cloth.solver import GRAVITY, ClothSolver
+from engine.cloth.welds import merge_map, pull_seams
+from engine.errors import InputError
+from engine.garment.garment import build_garment
+from engine.pattern.spec import PatternSpec
+
+H = 0.02
+SIDE = 0.20  # m
+
+
+def square_spec(side_cm: float = 20.0) -> PatternSpec:
+    s = side_cm
+    return PatternSpec.model_validate({"pattern": {"panels": {"square": {
+        "vertices": [[0, 0], [s, 0], [s, s], [0, s]],
+        "edges": [{"endpoints": [i, (i + 1) % 4]} for i in range(4)],
+        "translation": [0, 100, 0]}}, "stitches": []}})
+
+
+@pytest.fixture(scope="module", autouse=True)
+def one_numba_thread():
+    """These meshes are tiny: with the machine's cores busy, parallel kernels spend 100x longer
+    waiting for their threads than computing (measured 7.9 s vs 0.013 s for 500 steps)."""
+    import numba
+
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    yield
+    numba.set_num_threads(before)
+
+
+@pytest.fixture(scope="module")
+def garment():
+    return build_garment(square_spec(), h=H)
+
+
+def _model(garment, fabric="cotton", params=None):
+    g = garment
+    return build_model(g.uv, g.panel, g.lattice, g.quads, g.tris, g.seams, get_fabric(fabric), H, params)
+
+
+@pytest.fixture(scope="module")
+def model(garment):
+    return _model(garment)
+
+
+# --- model -------------------------------------------------------------------------------------------
+
+def test_spring_kinds_and_rest_lengths(model, garment):
+    for kind in (STRUCTURAL, SHEAR, FLEXION):
+        assert (model.kind == kind).sum() > 0
+    assert np.all(model.rest > 0)
+    # rest lengths are the flat (uv) distances
+    a, b = model.springs[:, 0], model.springs[:, 1]
+    np.testing.assert_allclose(model.rest, np.linalg.norm(garment.uv[a] - garment.uv[b], axis=1))
+    # no spring twice, none from a vertex to itself, indices in range
+    key = np.sort(model.springs, axis=1)
+    assert len(np.unique(key, axis=0)) == len(key)
+    assert np.all(a != b) and model.springs.min() >= 0 and model.springs.max() < model.n
+    # grid springs have the lengths of the grid: h (structural), h sqrt 2 (shear), 2h (flexion on grid)
+    shear = model.kind == SHEAR
+    np.testing.assert_allclose(model.rest[shear], H * np.sqrt(2), rtol=1e-9)
+    assert np.any(np.isclose(model.rest[model.kind == FLEXION], 2 * H))
+    # every mesh edge is a structural spring
+    q = garment.quads
+    edges = np.concatenate([q[:, [0, 1]], q[:, [1, 2]], q[:, [2, 3]], q[:, [3, 0]],
+                            garment.tris[:, [0, 1]], garment.tris[:, [1, 2]], garment.tris[:, [2, 0]]])
+    structural = {tuple(p) for p in np.sort(model.springs[model.kind == STRUCTURAL], axis=1).tolist()}
+    assert {tuple(p) for p in np.sort(edges, axis=1).tolist()} == structural
+
+
+def test_stiffness_from_fabric(model):
+    fab, p = get_fabric("cotton"), ClothParams()
+    np.testing.assert_allclose(model.stiffness[model.kind == STRUCTURAL], fab.stretch * p.stiffness_scale)
+    np.testing.assert_allclose(model.stiffness[model.kind == SHEAR], fab.shear * p.stiffness_scale)
+    np.testing.assert_allclose(model.stiffness[model.kind == FLEXION], fab.bending / H**2)
+
+
+@pytest.mark.parametrize("fabric", sorted(FABRICS))
+def test_mass_is_density_times_area(garment, fabric):
+    m = _model(garment, fabric)
+    fab = get_fabric(fabric)
+    exact = fab.density * SIDE * SIDE
+    g = garment
+    lumped = lumped_mass(g.uv, g.quads, g.tris, fab.density)
+    assert lumped.sum() == pytest.approx(exact, rel=1e-9)  # faces share their mass exactly
+    # the floor lifts the outline's sliver vertices: a little extra mass (2.0 % on this small
+    # square at h = 2 cm, where the four corners carry 1/6 of a median vertex each)
+    np.testing.assert_allclose(m.mass, np.maximum(lumped, MASS_FLOOR * np.median(lumped)))
+    assert exact <= m.mass.sum() <= exact * 1.021
+    np.testing.assert_allclose(m.inv_mass * m.mass, 1.0)
+
+
+@pytest.mark.parametrize("fabric", sorted(FABRICS))
+def test_dt_bound_is_eq4(garment, fabric):
+    m = _model(garment, fabric)
+    k_at = np.zeros(m.n)
+    for (a, b), k in zip(m.springs, m.stiffness):
+        k_at[a] += k
+        k_at[b] += k
+    expect = 0.4 * np.pi * np.sqrt(np.min(m.mass / k_at))
+    assert m.dt_bound > 0
+    assert m.dt_bound == pytest.approx(expect, rel=1e-12)
+
+
+def test_softer_springs_allow_a_larger_step(garment):
+    stiff = _model(garment)
+    soft = _model(garment, params=replace(ClothParams(), stiffness_scale=ClothParams().stiffness_scale / 4))
+    assert soft.dt_bound > stiff.dt_bound
+
+
+def test_model_refuses_bad_stiffness_scale(garment):
+    with pytest.raises(InputError, match="stiffness scale"):
+        _model(garment, params=replace(ClothParams(), stiffness_scale=0.0))
+
+
+# --- solver ------------------------------------------------------------------------------------------
+
+def test_solver_refuses_dt_above_the_bound(model):
+    with pytest.raises(InputError, match="stability bound"):
+        ClothSolver(model, dt=2 * model.dt_bound)
+    assert ClothSolver(model, dt=2 * model.dt_bound, force_dt=True).dt == pytest.approx(2 * model.dt_bound)
+    assert ClothSolver(model).dt == model.dt_bound  # default: the bound itself
+    assert ClothSolver(model, dt=0.5 * model.dt_bound).dt == pytest.approx(0.5 * model.dt_bound)
+    for bad in (0.0, -1e-4, float("nan")):
+        with pytest.raises(InputError, match="positive"):
+            ClothSolver(model, dt=bad, force_dt=True)
+
+
+def test_solver_refuses_unknown_velocity_mode(garment):
+    m = _model(garment, params=replace(ClothParams(), velocity_mode="sideways"))
+    with pytest.raises(InputError) as ei:
+        ClothSolver(m)
+    assert "sideways" in str(ei.value) and "average" in str(ei.value) and "zero" in str(ei.value)
+
+
+@pytest.mark.parametrize("mode", ["average", "zero"])
+def test_free_fall(garment, mode):
+    m = _model(garment, params=replace(ClothParams(), velocity_mode=mode))
+    solver = ClothSolver(m, collider=None)
+    state = ClothState(garment.positions.copy(), np.zeros_like(garment.positions))
+    com0 = (m.mass[:, None] * state.x).sum(0) / m.mass.sum()
+    steps = int(round(0.1 / solver.dt))
+    for _ in range(steps):
+        solver.step(state)
+    t = steps * solver.dt
+    assert np.all(np.isfinite(state.x)) and np.all(np.isfinite(state.v))
+    com = (m.mass[:, None] * state.x).sum(0) / m.mass.sum()
+    drop = com0[1] - com[1]
+    assert drop == pytest.approx(0.5 * 9.81 * t * t, rel=0.05)
+    assert abs(com[0] - com0[0]) < 1e-6 and abs(com[2] - com0[2]) < 1e-6
+    # falling as one piece: no stretch
+    assert solver.max_strain(state) < 1e-6
+    vy = (m.mass * state.v[:, 1]).sum() / m.mass.sum()
+    assert vy == pytest.approx(-9.81 * t, rel=0.05)
+    assert solver.iterations == steps
+
+
+def test_gravity_vector_is_y_down():
+    np.testing.assert_allclose(GRAVITY, [0.0, -9.81, 0.0])
+
+
+# --- velocity modification kernel ----------------------------------------------------------------------
+
+def _two_points(stretch=1.2, v=((-1.0, 0.3, 0.0), (1.0, -0.2, 0.5))):
+    x = np.array([[0.0, 0.0, 0.0], [stretch, 0.0, 0.0]])
+    return x, np.array(v, dtype=np.float64)
+
+
+def _vm(x, v, mode, threshold=0.1, recover=1e12, active=True):
+    springs = np.array([[0, 1]], dtype=np.int32)
+    rest = np.array([1.0])
+    work = np.zeros(1, dtype=np.int32)
+    return K.modify_velocities(x, v, springs, rest, np.array([active]), threshold, K.VM_MODES[mode],
+                               np.array([0.0, -9.81, 0.0]), 1e-4, np.zeros((2, 3)), 4, work, recover)
+
+
+@pytest.mark.parametrize("recover", [1e12, ClothParams().recover])
+def test_average_mode(recover):
+    x, v = _two_points()
+    v0 = v.copy()
+    n = _vm(x, v, "average", recover=recover)
+    assert n == 1
+    rel = v[1, 0] - v[0, 0]  # along the spring (x axis)
+    assert rel <= 1e-12
+    if recover > 1:
+        assert rel == pytest.approx(0.0, abs=1e-12)  # eq. 5: both set to their average
+    np.testing.assert_allclose(v.mean(axis=0), v0.mean(axis=0), atol=1e-12)  # momentum unchanged
+    np.testing.assert_allclose(v[:, 1:], v0[:, 1:])  # across the spring: untouched
+
+
+@pytest.mark.parametrize("recover", [1e12, ClothParams().recover])
+def test_zero_mode(recover):
+    x, v = _two_points()
+    v0 = v.copy()
+    _vm(x, v, "zero", recover=recover)
+    assert v[1, 0] - v[0, 0] <= 1e-12
+    if recover > 1:
+        np.testing.assert_allclose(v[:, 0], 0.0, atol=1e-12)  # seed 003: both set to zero
+    else:  # zero plus the recovery closing speed: a moves toward b, b toward a
+        assert v[0, 0] >= 0 and v[1, 0] <= 0
+    np.testing.assert_allclose(v[:, 1:], v0[:, 1:])
+
+
+@pytest.mark.parametrize("mode", ["average", "zero", "directional"])
+def test_vm_leaves_unstretched_or_closing_or_inactive_springs_alone(mode):
+    x, v = _two_points(stretch=1.05)  # within the 10 % threshold
+    v0 = v.copy()
+    assert _vm(x, v, mode) == 0
+    np.testing.assert_array_equal(v, v0)
+    x, v = _two_points(v=((1.0, 0, 0), (-1.0, 0, 0)))  # stretched but already closing
+    v0 = v.copy()
+    _vm(x, v, mode)
+    np.testing.assert_array_equal(v, v0)
+    x, v = _two_points()
+    v0 = v.copy()
+    assert _vm(x, v, mode, active=False) == 0
+    np.testing.assert_array_equal(v, v0)
+
+
+def test_directional_mode_rear_point_catches_up():
+    # a vertical spring falling: v_dir = g dt points down; b is below a (ahead along v_dir)
+    x = np.array([[0.0, 0.0, 0.0], [0.0, -1.2, 0.0]])
+    v = np.array([[0.0, -1.0, 0.0], [0.0, -3.0, 0.0]])  # b falls faster: stretching
+    _vm(x, v, "directional")
+    # the rear point (a) takes the front point's speed; the front is unchanged
+    np.testing.assert_allclose(v[1], [0.0, -3.0, 0.0])
+    np.testing.assert_allclose(v[0], [0.0, -3.0, 0.0])
+
+
+# --- welds ---------------------------------------------------------------------------------------------
+
+def test_merge_map_chains_and_keeps_others():
+    new = merge_map(6, np.array([[0, 1], [1, 2], [4, 5]]))
+    assert new[0] == new[1] == new[2]
+    assert new[4] == new[5]
+    assert len({new[0], new[3], new[4]}) == 3
+    assert sorted(set(new.tolist())) == [0, 1, 2]  # compact numbering
+    np.testing.assert_array_equal(merge_map(3, np.zeros((0, 2), np.int64)), [0, 1, 2])
+    # order of pairs and direction within a pair do not matter
+    a = merge_map(5, np.array([[2, 1], [3, 2]]))
+    assert a[1] == a[2] == a[3] and a[0] != a[1] and a[4] != a[1]
+
+
+@pytest.mark.parametrize("masses", ["equal", "unequal"])
+def test_pull_seams_conserves_momentum_and_closes(masses):
+    rng = np.random.default_rng(3)
+    n = 8
+    x = rng.normal(size=(n, 3))
+    v = rng.normal(size=(n, 3)) * 0.1
+    mass = np.full(n, 0.01) if masses == "equal" else rng.uniform(0.005, 0.02, n)
+    pairs = np.array([[0, 1], [2, 3], [4, 5], [6, 7]], dtype=np.int32)
+    welded = np.zeros(len(pairs), dtype=np.bool_)
+    p0 = (mass[:, None] * v).sum(0)
+    v0 = v.copy()
+    tau, vmax = 0.5, 1.0
+    pull_seams(x, v, mass, pairs, welded, tau, vmax, np.zeros(n, np.bool_), np.zeros((n, 3)))
+    np.testing.assert_allclose((mass[:, None] * v).sum(0), p0, atol=1e-12)
+    for a, b in pairs:
+        d = x[b] - x[a]
+        gap = np.linalg.norm(d)
+        closing = (v[a] - v[b]) @ d / gap
+        assert closing == pytest.approx(min(gap / tau, vmax), rel=1e-9)
+    # a welded pair is left to hold_welds
+    v = v0.copy()
+    pull_seams(x, v, mass, pairs, np.ones(len(pairs), np.bool_), tau, vmax, np.zeros(n, np.bool_), np.zeros((n, 3)))
+    np.testing.assert_array_equal(v, v0)
+
+
+# --- fabrics -------------------------------------------------------------------------------------------
+
+def test_unknown_fabric_lists_the_fabrics():
+    with pytest.raises(InputError) as ei:
+        get_fabric("wool")
+    msg = str(ei.value)
+    assert "wool" in msg
+    for name in ("cotton", "denim", "silk", "jersey"):
+        assert name in msg
+
+
+def test_fabrics_are_physical():
+    for f in FABRICS.values():
+        assert 0.03 < f.density < 0.6  # kg/m^2: 30 .. 600 g/m^2
+        assert f.stretch > 0 and f.shear > 0 and f.bending > 0
+        assert 0 < f.friction < 1 and 0 < f.strain_threshold < 0.5
+    assert FABRICS["denim"].density > FABRICS["cotton"].density > FABRICS["silk"].density
+    assert FABRICS["jersey"].strain_threshold > FABRICS["cotton"].strain_threshold

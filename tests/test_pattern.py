@@ -1,0 +1,325 @@
+"""Patterns: the GarmentCode spec model, JSON/SVG io, edge geometry and the validator."""
+
+from __future__ import annotations
+
+import copy
+import json
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from engine.errors import InputError
+from engine.pattern import geometry as geo
+from engine.pattern.io import load_pattern, parse_pattern, pattern_to_dict, pattern_to_svg, save_pattern
+from engine.pattern.spec import Panel, PatternSpec
+from engine.pattern.validate import check, validate
+from tests.samples import SAMPLE_SKIRT
+
+SVG = "{http://www.w3.org/2000/svg}"
+
+
+@pytest.fixture(scope="module")
+def raw() -> dict:
+    return json.loads(SAMPLE_SKIRT.read_text())
+
+
+@pytest.fixture(scope="module")
+def skirt() -> PatternSpec:
+    return load_pattern(SAMPLE_SKIRT)
+
+
+def _spec(d: dict) -> PatternSpec:
+    return PatternSpec.model_validate(d)
+
+
+def _square_panel(size=20.0, **extra) -> dict:
+    v = [[0, 0], [size, 0], [size, size], [0, size]]
+    return {"vertices": v, "edges": [{"endpoints": [i, (i + 1) % 4]} for i in range(4)], **extra}
+
+
+def _subset(small, big, path="") -> list[str]:
+    """Where `small` (parsed JSON) is not contained in `big`."""
+    bad = []
+    if isinstance(small, dict):
+        for k, v in small.items():
+            if not isinstance(big, dict) or k not in big:
+                bad.append(f"{path}{k} missing")
+            else:
+                bad += _subset(v, big[k], f"{path}{k}.")
+    elif isinstance(small, list):
+        if not isinstance(big, list) or len(small) != len(big):
+            return [f"{path} length differs"]
+        for i, (a, b) in enumerate(zip(small, big)):
+            bad += _subset(a, b, f"{path}{i}.")
+    elif small != big:
+        bad.append(f"{path}: {small!r} != {big!r}")
+    return bad
+
+
+# --- loading, round trip, SVG ------------------------------------------------------------------
+
+def test_sample_loads(skirt):
+    assert set(skirt.pattern.panels) == {"skirt_front", "skirt_back", "wb_back", "wb_front"}
+    assert len(skirt.pattern.stitches) == 6
+    assert skirt.scale == pytest.approx(0.01)
+    assert skirt.pattern.panels["skirt_front"].edges[1].curvature.type == "circle"
+
+
+def test_sample_validates_clean(skirt):
+    problems = validate(skirt)
+    assert [p for p in problems if p.level == "error"] == []
+    assert check(skirt) == problems  # no errors: check returns the (warning) list, no raise
+
+
+def test_round_trip_equal(skirt, tmp_path):
+    p = save_pattern(skirt, tmp_path / "skirt.json")
+    again = load_pattern(p)
+    assert pattern_to_dict(again) == pattern_to_dict(skirt)
+
+
+def test_round_trip_keeps_everything_in_the_file(raw, skirt, tmp_path):
+    p = save_pattern(skirt, tmp_path / "skirt.json")
+    written = json.loads(p.read_text())
+    assert _subset(raw, written) == []  # every key/value of the original survives (labels too)
+
+
+def test_unmodelled_garmentcode_fields_survive(raw, tmp_path):
+    d = copy.deepcopy(raw)
+    d["parameters"] = {"length": {"v": 0.7, "range": [0.2, 0.95], "type": "float"}}
+    d["parameter_order"] = ["length"]
+    d["pattern"]["panels"]["skirt_front"]["mystery"] = {"keep": [1, 2, 3]}
+    spec = parse_pattern(json.dumps(d))
+    written = json.loads(save_pattern(spec, tmp_path / "p.json").read_text())
+    assert written["parameters"] == d["parameters"]
+    assert written["parameter_order"] == ["length"]
+    assert written["pattern"]["panels"]["skirt_front"]["mystery"] == {"keep": [1, 2, 3]}
+    # and the (empty) ones of the sample are not dropped either
+    assert "parameters" in pattern_to_dict(load_pattern(SAMPLE_SKIRT))
+
+
+def test_svg(skirt):
+    svg = pattern_to_svg(skirt)
+    root = ET.fromstring(svg)  # parseable XML
+    assert root.tag == SVG + "svg"
+    polys = root.findall(f".//{SVG}polygon")
+    assert len(polys) == len(skirt.pattern.panels) == 4
+    for poly in polys:
+        pts = np.array([[float(c) for c in p.split(",")] for p in poly.get("points").split()])
+        assert len(pts) >= 4 and np.all(np.isfinite(pts))
+    texts = [t.text for t in root.findall(f".//{SVG}text")]
+    for k in range(len(skirt.pattern.stitches)):
+        assert texts.count(f"s{k}") == 2, f"stitch s{k} should label both of its edges"
+    for name in skirt.pattern.panels:
+        assert name in texts
+    assert len(root.findall(f".//{SVG}polyline")) == 2 * len(skirt.pattern.stitches)
+
+
+# --- geometry -------------------------------------------------------------------------------------
+
+def _fit_circle(pts: np.ndarray) -> tuple[np.ndarray, float]:
+    """Least-squares (Kasa) circle through 2D points: centre, radius."""
+    A = np.column_stack([2 * pts[:, 0], 2 * pts[:, 1], np.ones(len(pts))])
+    b = (pts ** 2).sum(axis=1)
+    (cx, cy, c), *_ = np.linalg.lstsq(A, b, rcond=None)
+    return np.array([cx, cy]), float(np.sqrt(c + cx * cx + cy * cy))
+
+
+def _side(pts, start, end) -> np.ndarray:
+    """> 0 left of start->end, < 0 right."""
+    d = end - start
+    r = pts - start
+    return d[0] * r[:, 1] - d[1] * r[:, 0]
+
+
+def test_circle_arc_radius_and_bulge(skirt):
+    panel = skirt.pattern.panels["skirt_front"]
+    hem = panel.edges[1]  # params [58.44, large_arc 0, right 1]
+    assert hem.curvature.params[2] == 1
+    pts = geo.edge_dense(panel, hem, skirt.scale)
+    v = np.asarray(panel.vertices) * skirt.scale
+    start, end = v[hem.endpoints[0]], v[hem.endpoints[1]]
+    np.testing.assert_allclose(pts[0], start, atol=1e-12)
+    np.testing.assert_allclose(pts[-1], end, atol=1e-12)
+    centre, r = _fit_circle(pts)
+    assert r == pytest.approx(0.5844, abs=2e-4)
+    assert np.abs(np.linalg.norm(pts - centre, axis=1) - 0.58438).max() < 1e-4
+    side = _side(pts[1:-1], start, end)
+    assert np.all(side < 0), "right=1 must bulge to the right of start->end"
+    # small arc (large_arc = 0): the bulge is less than the radius
+    chord = np.linalg.norm(end - start)
+    sag = np.abs(side).max() / chord
+    assert 0 < sag < r
+
+
+def test_circle_arc_right_flag_zero_bulges_left(skirt):
+    panel = skirt.pattern.panels["skirt_front"]
+    waist = panel.edges[3]  # params [17.9, 0, right 0]
+    assert waist.curvature.params[2] == 0
+    pts = geo.edge_dense(panel, waist, skirt.scale)
+    v = np.asarray(panel.vertices) * skirt.scale
+    assert np.all(_side(pts[1:-1], v[waist.endpoints[0]], v[waist.endpoints[1]]) > 0)
+    _, r = _fit_circle(pts)
+    assert r == pytest.approx(0.17896, abs=2e-4)
+
+
+def test_flare_skirt_waist_and_hem_are_concentric(skirt):
+    """A circle skirt's waist and hem arcs share their centre: a physical check of the `right`
+    convention (the opposite reading puts the two centres ~30 cm apart)."""
+    panel = skirt.pattern.panels["skirt_front"]
+    c_hem, r_hem = _fit_circle(geo.edge_dense(panel, panel.edges[1], skirt.scale))
+    c_waist, r_waist = _fit_circle(geo.edge_dense(panel, panel.edges[3], skirt.scale))
+    assert np.linalg.norm(c_hem - c_waist) < 1e-3
+    assert r_hem - r_waist == pytest.approx(0.5844 - 0.1790, abs=1e-3)
+
+
+def _unit_quadratic(ctrl=(0.5, 0.2)) -> Panel:
+    return Panel(vertices=[(0.0, 0.0), (1.0, 0.0)],
+                 edges=[{"endpoints": [0, 1], "curvature": {"type": "quadratic", "params": [list(ctrl)]}}])
+
+
+def test_quadratic_edge_midpoint():
+    panel = _unit_quadratic()
+    e = panel.edges[0]
+    # B(0.5) = 0.25 s + 0.5 c + 0.25 e with c = (0.5, 0.2) (y: the edge turned +90 deg)
+    dense = geo.edge_dense(panel, e, 1.0, n=257)
+    np.testing.assert_allclose(dense[128], [0.5, 0.1], atol=1e-12)
+    # symmetric curve: the arc-length midpoint is the same point
+    mid = geo.edge_samples(panel, e, 1.0, 2)[1]
+    np.testing.assert_allclose(mid, [0.5, 0.1], atol=1e-4)
+    # the edge is longer than its chord, shorter than the control polygon
+    length = geo.edge_length(panel, e, 1.0)
+    assert 1.0 < length < 2 * np.hypot(0.5, 0.2)
+
+
+def test_quadratic_relative_control_follows_the_edge_direction():
+    # the same relative control on the reversed edge bulges to the other side in absolute terms
+    panel = Panel(vertices=[(1.0, 0.0), (0.0, 0.0)],
+                  edges=[{"endpoints": [0, 1], "curvature": {"type": "quadratic", "params": [[0.5, 0.2]]}}])
+    dense = geo.edge_dense(panel, panel.edges[0], 1.0, n=257)
+    np.testing.assert_allclose(dense[128], [0.5, -0.1], atol=1e-12)
+
+
+@pytest.mark.parametrize("which", ["circle", "quadratic", "straight"])
+def test_edge_samples_uniform_in_arc_length(skirt, which):
+    if which == "circle":
+        panel = skirt.pattern.panels["skirt_front"]
+        e, scale = panel.edges[1], skirt.scale
+    elif which == "quadratic":
+        panel = _unit_quadratic((0.3, 0.6))  # strongly curved, asymmetric
+        e, scale = panel.edges[0], 1.0
+    else:
+        panel = skirt.pattern.panels["skirt_front"]
+        e, scale = panel.edges[0], skirt.scale
+    n = 37
+    s = geo.edge_samples(panel, e, scale, n)
+    assert s.shape == (n + 1, 2)
+    d = np.linalg.norm(np.diff(s, axis=0), axis=1)
+    assert d.max() / d.min() - 1 < 0.01
+    assert d.sum() == pytest.approx(geo.edge_length(panel, e, scale), rel=1e-3)
+    v = np.asarray(panel.vertices) * scale
+    np.testing.assert_allclose(s[0], v[e.endpoints[0]], atol=1e-12)
+    np.testing.assert_allclose(s[-1], v[e.endpoints[1]], atol=1e-12)
+
+
+# --- validation -----------------------------------------------------------------------------------
+
+def _errors(spec: PatternSpec):
+    return [p for p in validate(spec) if p.level == "error"]
+
+
+def _assert_refused(spec: PatternSpec, panel: str, edge: int, words: str):
+    errs = _errors(spec)
+    assert any(p.panel == panel and p.edge == edge and words in p.message for p in errs), errs
+    with pytest.raises(InputError) as ei:
+        check(spec, "bad.json")
+    msg = str(ei.value)
+    assert "\n" not in msg and msg.startswith("bad.json: ")
+    assert f"panel '{panel}' edge {edge}" in msg, msg
+
+
+def test_stitch_missing_panel(raw):
+    d = copy.deepcopy(raw)
+    d["pattern"]["stitches"][2][1]["panel"] = "sleeve"
+    _assert_refused(_spec(d), "sleeve", 3, "does not exist")
+
+
+def test_stitch_edge_out_of_range(raw):
+    d = copy.deepcopy(raw)
+    d["pattern"]["stitches"][0][0]["edge"] = 9
+    _assert_refused(_spec(d), "skirt_front", 9, "edges 0..3")
+
+
+def test_stitched_edges_of_different_length():
+    d = {"pattern": {"panels": {"a": _square_panel(20.0), "b": _square_panel(23.0)},
+                     "stitches": [[{"panel": "a", "edge": 1}, {"panel": "b", "edge": 3}]]}}
+    _assert_refused(_spec(d), "a", 1, "differ by more than")
+    # within 10 % is accepted (ease)
+    d["pattern"]["panels"]["b"] = _square_panel(21.5)
+    assert _errors(_spec(d)) == []
+
+
+def test_bow_tie_outline():
+    panel = _square_panel()
+    panel["vertices"] = [[0, 0], [20, 0], [0, 20], [20, 20]]  # edges 1 and 3 cross
+    spec = _spec({"pattern": {"panels": {"tie": panel}}})
+    errs = _errors(spec)
+    assert len(errs) == 1 and errs[0].panel == "tie" and "crosses itself" in errs[0].message
+    assert {errs[0].edge, int(errs[0].message.split("crosses edge ")[1].rstrip(")"))} == {1, 3}
+    with pytest.raises(InputError, match="panel 'tie' edge 1"):
+        check(spec)
+
+
+@pytest.mark.parametrize("curved, rel", [(3, [0.5, 3.0]), (1, [0.5, 3.0])])
+def test_self_intersection_names_the_right_edges_with_curved_edges(curved, rel):
+    # a square whose left (3) or right (1) edge, a quadratic, bulges through the opposite straight edge
+    panel = _square_panel()
+    panel["edges"][curved]["curvature"] = {"type": "quadratic", "params": [rel]}
+    spec = _spec({"pattern": {"panels": {"p": panel}}})
+    errs = _errors(spec)
+    assert errs and "crosses itself" in errs[0].message
+    named = {errs[0].edge, int(errs[0].message.split("crosses edge ")[1].rstrip(")"))}
+    assert named == {1, 3}, errs[0]
+
+
+def test_degenerate_edge():
+    panel = _square_panel()
+    panel["vertices"].append([10, 10])
+    panel["edges"] = [{"endpoints": [0, 1]}, {"endpoints": [1, 1]}, {"endpoints": [1, 2]},
+                      {"endpoints": [2, 3]}, {"endpoints": [3, 0]}]
+    _assert_refused(_spec({"pattern": {"panels": {"sq": panel}}}), "sq", 1, "degenerate edge")
+
+
+def test_outline_edges_do_not_chain():
+    panel = _square_panel()
+    panel["edges"] = [{"endpoints": [0, 1]}, {"endpoints": [2, 3]}, {"endpoints": [1, 2]}, {"endpoints": [3, 0]}]
+    _assert_refused(_spec({"pattern": {"panels": {"sq": panel}}}), "sq", 0, "next edge starts at vertex 2")
+
+
+def test_good_square_is_clean():
+    assert validate(_spec({"pattern": {"panels": {"sq": _square_panel()}}})) == []
+
+
+@pytest.mark.parametrize("text, words", [
+    ("{not json", "not valid JSON"),
+    (b"\xff\xfe\x00garbage", "not valid JSON"),
+    ('{"panels": {}}', "no 'pattern' object"),
+    ("[1, 2, 3]", "no 'pattern' object"),
+    ('{"pattern": {"panels": {}}}', "invalid pattern"),
+    ('{"pattern": {"panels": {"a": {"vertices": [[0, 0], [1, 0]], "edges": [{"endpoints": [0, 5]}]}}}}',
+     "names vertex 5"),
+])
+def test_parse_pattern_refusals_are_one_line(text, words):
+    with pytest.raises(InputError) as ei:
+        parse_pattern(text, source="up.json")
+    msg = str(ei.value)
+    assert words in msg and msg.startswith("up.json: ")
+    assert "\n" not in msg
+
+
+def test_load_pattern_missing_and_empty(tmp_path):
+    with pytest.raises(InputError, match="not found"):
+        load_pattern(tmp_path / "nope.json")
+    (tmp_path / "empty.json").write_text("")
+    with pytest.raises(InputError, match="empty"):
+        load_pattern(tmp_path / "empty.json")
