@@ -1,5 +1,9 @@
 """Small numba kernels of one cloth step (seed 003 §3-6, seed 000 §3, §5). NumPy/numba only.
 
+Serial on purpose (measured): on this 2-core machine a parallel step kernel saves little when the
+machine is idle and is 10-600x slower when another process holds a core (numba's workers wait
+for the descheduled one) -- and a try-on service runs several jobs at once.
+
 Arrays: x, v (N, 3) float64; springs given as CSR vertex adjacency (ptr (N+1,), other, sid)
 so force evaluation is a race-free gather, parallel over vertices.
 """
@@ -7,7 +11,7 @@ so force evaluation is a race-free gather, parallel over vertices.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 VM_ZERO, VM_AVERAGE, VM_DIRECTIONAL, VM_PROVOT = 0, 1, 2, 3
 MAX_PUSH = 1.0  # m/s: fastest a collision response moves a point out of the body
@@ -15,7 +19,7 @@ PUSH_TIME = 0.02  # s: a point too deep in the band is moved out over about this
 VM_MODES = {"zero": VM_ZERO, "average": VM_AVERAGE, "directional": VM_DIRECTIONAL, "provot": VM_PROVOT}
 
 
-@njit(parallel=True, fastmath=True, cache=True)
+@njit(fastmath=True, cache=True)
 def eval_forces_and_integrate(x, v, inv_mass, mass, ptr, other, sid, rest, k,
                               seam_ptr, seam_other, k_seam, seam_fmax, gravity, damping,
                               contact, contact_n, mu, dt, f_out):
@@ -25,7 +29,7 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, ptr, other, sid, rest, k,
     the previous step (cancel the force into the body, Coulomb friction on the tangential part),
     then the velocity half of eq. 3: v += dt f / m. f_out keeps the force for diagnostics."""
     n = x.shape[0]
-    for i in prange(n):
+    for i in range(n):
         fx = mass[i] * gravity[0] - damping * mass[i] * v[i, 0]
         fy = mass[i] * gravity[1] - damping * mass[i] * v[i, 1]
         fz = mass[i] * gravity[2] - damping * mass[i] * v[i, 2]
@@ -221,11 +225,11 @@ def collision_points(x, v, dt, quads, tris, p_out, pv_out):
     (face-body checks, seed 003 §6), at their predicted positions x + dt v."""
     n = x.shape[0]
     nq = quads.shape[0]
-    for i in prange(n):
+    for i in range(n):
         for c in range(3):
             p_out[i, c] = x[i, c] + dt * v[i, c]
             pv_out[i, c] = v[i, c]
-    for q in prange(nq):
+    for q in range(nq):
         for c in range(3):
             sx = 0.0
             sv = 0.0
@@ -234,7 +238,7 @@ def collision_points(x, v, dt, quads, tris, p_out, pv_out):
                 sv += v[quads[q, r], c]
             pv_out[n + q, c] = 0.25 * sv
             p_out[n + q, c] = 0.25 * sx + dt * 0.25 * sv
-    for t in prange(tris.shape[0]):
+    for t in range(tris.shape[0]):
         for c in range(3):
             sx = 0.0
             sv = 0.0
@@ -250,13 +254,13 @@ def point_velocities(v, quads, tris, pv_out):
     """Velocities of the checked points (vertices, quad midpoints, triangle centroids) from v."""
     n = v.shape[0]
     nq = quads.shape[0]
-    for i in prange(n):
+    for i in range(n):
         for c in range(3):
             pv_out[i, c] = v[i, c]
-    for q in prange(nq):
+    for q in range(nq):
         for c in range(3):
             pv_out[n + q, c] = 0.25 * (v[quads[q, 0], c] + v[quads[q, 1], c] + v[quads[q, 2], c] + v[quads[q, 3], c])
-    for t in prange(tris.shape[0]):
+    for t in range(tris.shape[0]):
         for c in range(3):
             pv_out[n + nq + t, c] = (v[tris[t, 0], c] + v[tris[t, 1], c] + v[tris[t, 2], c]) / 3.0
 
@@ -344,27 +348,27 @@ def collision_response(v, status, normal, body_v, depth, pv, n_vertices, quads, 
     return hits
 
 
-@njit(parallel=True, fastmath=True, cache=True)
+@njit(fastmath=True, cache=True)
 def integrate_positions(x, v, dt):
     """The position half of eq. 3: p += dt v."""
-    for i in prange(x.shape[0]):
+    for i in range(x.shape[0]):
         x[i, 0] += dt * v[i, 0]
         x[i, 1] += dt * v[i, 1]
         x[i, 2] += dt * v[i, 2]
 
 
-@njit(parallel=True, fastmath=True, cache=True)
+@njit(fastmath=True, cache=True)
 def kinetic_energy(v, mass):
     e = 0.0
-    for i in prange(v.shape[0]):
+    for i in range(v.shape[0]):
         e += 0.5 * mass[i] * (v[i, 0] ** 2 + v[i, 1] ** 2 + v[i, 2] ** 2)
     return e
 
 
-@njit(parallel=True, fastmath=True, cache=True)
+@njit(fastmath=True, cache=True)
 def max_strain(x, springs, rest, active):
     out = np.zeros(springs.shape[0])
-    for s in prange(springs.shape[0]):
+    for s in range(springs.shape[0]):
         if active[s]:
             a = springs[s, 0]
             b = springs[s, 1]

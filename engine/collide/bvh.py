@@ -532,11 +532,12 @@ def interp_batch(faces, face, bary, field, out):
         out[p, 0] = r[0]; out[p, 1] = r[1]; out[p, 2] = r[2]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def collide_batch(points, tol, max_d2, node_lo, node_hi, node_a, node_n, prim, tri_xyz, faces,
                   face_n, edge_n, vert_n, vvel, has_vel, status, normal, velocity, depth):
-    """The collider protocol per point (ObjectSpaceCollider.query); outputs preallocated."""
-    for p in prange(points.shape[0]):
+    """The collider protocol per point (ObjectSpaceCollider.query); outputs preallocated. Serial:
+    it runs every simulation step (see engine/cloth/kernels.py on parallel step kernels)."""
+    for p in range(points.shape[0]):
         r = bvh_signed(points[p, 0], points[p, 1], points[p, 2], max_d2, node_lo, node_hi,
                        node_a, node_n, prim, tri_xyz, faces, face_n, edge_n, vert_n)
         sd = r[0]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from engine.collide.maps import CollisionMaps
-from engine.collide.query import query_batch
+from engine.collide.query import query_batch_serial
 
 
 class MapCollider:
@@ -34,6 +34,6 @@ class MapCollider:
     def query(self, points: np.ndarray):
         if points.shape[0] != self._n:
             self._alloc(points.shape[0])
-        query_batch(points, self.tol, *self.maps.kernel_args(), self.status, self.surface, self.depth,
+        query_batch_serial(points, self.tol, *self.maps.kernel_args(), self.status, self.surface, self.depth,
                     self.normal, self.velocity, self.map_index)
         return self.status, self.normal, self.velocity, self.depth

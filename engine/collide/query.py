@@ -200,6 +200,17 @@ def query_batch(points, tol, surf, vel, has_vel, kind, side_src, geom, layout,
                          velocity, map_index)
 
 
+@njit(cache=True)
+def query_batch_serial(points, tol, surf, vel, has_vel, kind, side_src, geom, layout,
+                       status, surface, penetration, normal, velocity, map_index):
+    """query_batch on one thread: the cloth solver's per-step query (a parallel region per step
+    stalls whenever another process holds a core)."""
+    for p in range(points.shape[0]):
+        query_point_into(points[p, 0], points[p, 1], points[p, 2], tol, surf, vel, has_vel,
+                         kind, side_src, geom, layout, p, status, surface, penetration, normal,
+                         velocity, map_index)
+
+
 @dataclass
 class QueryResult:
     """status: (N,) int8, 0 clear / 1 band / 2 inside; surface: (N, 3) float64 surface point;
