@@ -6,7 +6,9 @@ ellipse is the body's cross-section (torso and legs, never the arms) grown by a 
 where the garment is wider than that, grown until the panel's width spans half of it. A panel's
 horizontal coordinate is laid out as arc length from the front (or back) centre line, so front and
 back panels meet at the sides and the side seams start almost closed. Sleeves are wrapped onto a
-circular cylinder around the arm's axis with their underarm seam underneath.
+circular cylinder around the arm's axis with their underarm seam underneath (wrap_sleeve: the
+same on tubes around the arm's smoothed, elbow-bent centre line). Trouser panels wrap the torso
+above the crotch and their own leg below it, blended over 10 cm (wrap_trousers, LegSections).
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ class BodySections:
             f = f[keep_seg[f].all(axis=1)]
         self.ys = np.arange(0.02, float(v[:, 1].max()), 0.01)
         cuts = slice_stack(v, f, self.ys)
-        ell = np.full((len(self.ys), 4), np.nan)
+        ell = np.full((len(self.ys), 5), np.nan)  # the 5th: how much `cover` grew the ellipse
         for k, pieces in enumerate(cuts):
             # scans: arms and hands hang beside the hips; keep pieces near the body axis
             pts = [p.points for p in pieces if abs(p.centroid[0]) < 0.2 or body.segments is not None]
@@ -45,17 +47,17 @@ class BodySections:
                 ell[k] = _covering_ellipse(p)
             else:
                 lo, hi = p.min(axis=0), p.max(axis=0)
-                ell[k] = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (hi[0] - lo[0]) / 2, (hi[1] - lo[1]) / 2]
+                ell[k] = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (hi[0] - lo[0]) / 2, (hi[1] - lo[1]) / 2, 1.0]
         ok = np.isfinite(ell[:, 0])
         if ok.sum() < 10:
             raise InputError("could not find the body's cross-sections to place the garment")
-        for c in range(4):  # fill gaps (e.g. a hole in a scan) by interpolation
+        for c in range(5):  # fill gaps (e.g. a hole in a scan) by interpolation
             ell[:, c] = np.interp(self.ys, self.ys[ok], ell[ok, c])
         self.ell = ell
 
-    def at(self, y: np.ndarray) -> np.ndarray:
-        """(len(y), 4) ellipses at heights y."""
-        return np.stack([np.interp(y, self.ys, self.ell[:, c]) for c in range(4)], axis=1)
+    def at(self, y: np.ndarray, grown: bool = False) -> np.ndarray:
+        """(len(y), 4) ellipses at heights y (grown: (len(y), 5), + the growth factor of cover)."""
+        return np.stack([np.interp(y, self.ys, self.ell[:, c]) for c in range(5 if grown else 4)], axis=1)
 
 
 def _covering_ellipse(p: np.ndarray) -> list[float]:
@@ -66,7 +68,7 @@ def _covering_ellipse(p: np.ndarray) -> list[float]:
     c = (lo + hi) / 2
     a, b = max((hi[0] - lo[0]) / 2, 1e-3), max((hi[1] - lo[1]) / 2, 1e-3)
     k = max(1.0, float(np.sqrt((((p[:, 0] - c[0]) / a) ** 2 + ((p[:, 1] - c[1]) / b) ** 2).max())))
-    return [c[0], c[1], a * k, b * k]
+    return [c[0], c[1], a * k, b * k, k]
 
 
 def _ellipse_point(a: float, b: float, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -104,11 +106,13 @@ def wrap_torso(uv: np.ndarray, hint: PanelHint, sections: BodySections, top_y: f
         yr = top_y + r * 0.01
         if clamp_y is not None:
             yr = min(yr, clamp_y)
-        cx, cz, a, b = sections.at(np.array([yr]))[0]
+        cx, cz, a, b, kc = sections.at(np.array([yr]), grown=True)[0]
         a, b = a + CLEARANCE, b + CLEARANCE
         width = _width_at(outline, r * 0.01)
         half = _half_perimeter(a, b)
-        k = max(1.0, width / half) if widen_to is None else max(1.0, widen_to / half)
+        # kc > 1 only for covering sections: a tighter garment shrinks them back toward the box
+        # ellipse (halfway, in ratio) so that its side seams start (nearly) closed
+        k = max(kc ** -0.5, width / half) if widen_to is None else max(kc ** -0.5, widen_to / half)
         a, b = a * k, b * k
         sn, cs = _ellipse_point(a, b, u[sel])
         out[sel, 0] = cx + a * sn
@@ -248,6 +252,9 @@ def wrap_sleeve(uv: np.ndarray, path: np.ndarray, origin: int, radius: np.ndarra
 # ------------------------------------------------------------------ trousers
 
 
+FOOT_TOP, FOOT_TAPER = 0.10, 0.15  # m: below FOOT_TOP the trouser leg is one tube around the foot
+
+
 class LegSections:
     """Per-leg ellipses (centre x, z; semi-axes a, b) every 1 cm: below the crotch the cut of
     each leg, above it the body's half (x > 0 for the left leg, x < 0 for the right) of the
@@ -260,7 +267,8 @@ class LegSections:
             f = f[keep_seg[f].all(axis=1)]
         self.ys = np.arange(0.02, float(v[:, 1].max()) * 0.7, 0.01)
         cuts = slice_stack(v, f, self.ys)
-        ell = {1: np.full((len(self.ys), 4), np.nan), -1: np.full((len(self.ys), 4), np.nan)}
+        ell = {1: np.full((len(self.ys), 5), np.nan), -1: np.full((len(self.ys), 5), np.nan)}
+        foot = {1: [], -1: []}
         for k, pieces in enumerate(cuts):
             central = [p for p in pieces if p.xmin < 0.0 < p.xmax]
             for s in (1, -1):
@@ -276,16 +284,25 @@ class LegSections:
                         continue
                     pts = max(side, key=lambda p: p.length).points
                 ell[s][k] = _covering_ellipse(pts)
+                if self.ys[k] <= FOOT_TOP:
+                    foot[s].append(pts)
         for s in (1, -1):
             ok = np.isfinite(ell[s][:, 0])
             if ok.sum() < 10:
                 raise InputError("could not find the body's legs to place the trousers")
-            for c in range(4):
+            for c in range(5):
                 ell[s][:, c] = np.interp(self.ys, self.ys[ok], ell[s][ok, c])
+            if foot[s]:
+                # the foot grows fast toward the sole: below the ankle one tube around the whole
+                # foot, tapering into the leg's own cuts over FOOT_TAPER (no rows torn apart)
+                fe = np.array(_covering_ellipse(np.concatenate(foot[s])))
+                w = np.clip((self.ys - FOOT_TOP) / FOOT_TAPER, 0.0, 1.0)[:, None]
+                ell[s] = w * ell[s] + (1 - w) * fe[None]
         self.ell = ell
 
     def at(self, y: np.ndarray, s: int) -> np.ndarray:
-        return np.stack([np.interp(y, self.ys, self.ell[s][:, c]) for c in range(4)], axis=1)
+        """(len(y), 5) ellipses of leg s at heights y, + how much covering grew them."""
+        return np.stack([np.interp(y, self.ys, self.ell[s][:, c]) for c in range(5)], axis=1)
 
 
 def wrap_trousers(uv: np.ndarray, side: str, leg: int, top_y: float, crotch_y: float, crease: float,
@@ -312,9 +329,11 @@ def wrap_trousers(uv: np.ndarray, side: str, leg: int, top_y: float, crotch_y: f
         vr = r * 0.01
         yr = top_y + vr
         # torso
-        cx, cz, a, b = torso.at(np.array([max(yr, crotch_y)]))[0]
+        # a garment tighter than the covering ellipse shrinks it (at most back to the cut's box
+        # ellipse), so its seams start closed: a waist whose side seams start open slides down
+        cx, cz, a, b, kc = torso.at(np.array([max(yr, crotch_y)]), grown=True)[0]
         a, b = a + CLEARANCE, b + CLEARANCE
-        k = max(1.0, half_girth(vr) / _half_perimeter(a, b))
+        k = max(1.0 / kc, half_girth(vr) / _half_perimeter(a, b))
         a, b = a * k, b * k
         t = leg * u[sel]  # toward the outseam; < 0 in the crotch extension
         sn, cs = _ellipse_point(a, b, leg * np.maximum(t, 0.0))
@@ -324,9 +343,9 @@ def wrap_trousers(uv: np.ndarray, side: str, leg: int, top_y: float, crotch_y: f
         p_t[sel, 2] = cz + sg * (b + stand) * cs
         # leg
         yl = min(yr, crotch_y)
-        cx, cz, a, b = legs.at(np.array([yl]), leg)[0]
+        cx, cz, a, b, kc = legs.at(np.array([yl]), leg)[0]
         a, b = a + CLEARANCE, b + CLEARANCE
-        k = max(1.0, leg_girth(min(vr, crotch_y - top_y)) / (2 * _half_perimeter(a, b)))
+        k = max(1.0 / kc, leg_girth(min(vr, crotch_y - top_y)) / (2 * _half_perimeter(a, b)))
         a, b = a * k, b * k
         sn, cs = _ellipse_point(a, b, u[sel] - crease)
         p_l[sel, 0] = cx + a * sn
