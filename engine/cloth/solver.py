@@ -21,6 +21,7 @@ import numpy as np
 
 from engine.cloth import kernels as K
 from engine.cloth.model import FLEXION, ClothModel, ClothState, csr_adjacency
+from engine.cloth.welds import pull_seams
 from engine.errors import InputError
 
 GRAVITY = np.array([0.0, -9.81, 0.0])
@@ -66,6 +67,7 @@ class ClothSolver:
         self.last_hits = 0
         self.strain_guard = p.strain_guard  # the drape turns it off while sewing
         self.recover = p.recover  # ... and the strain recovery (it would fight the seam pull)
+        self.sewing = None  # (pairs, welded, tau, vmax) while sewing: see engine.cloth.welds
 
     def set_seams(self, pairs: np.ndarray, k_seam: float, fmax: float = np.inf) -> None:
         """Seam forces: zero-rest-length springs of stiffness k_seam between sewn vertex pairs,
@@ -92,6 +94,11 @@ class ClothSolver:
         n_act = K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
                                     self.mode, self.gravity * gravity_scale, dt, self.body_v, p.vm_passes,
                                     self.vm_work, self.recover)
+        if self.sewing is not None:
+            # sewing has priority over the strain limit (it stretches cloth near a seam by
+            # design; the drape's strain recovery relaxes that), but not over the collision below
+            pairs, welded, tau, vmax = self.sewing
+            pull_seams(state.x, state.v, m.mass, pairs, welded, tau, vmax, self.contact, self.contact_n)
         t1 = time.perf_counter()
         # collision detection and response (vertices and face midpoints, eq. 12/15)
         if self.collider is not None:

@@ -38,6 +38,7 @@ from engine.collide.gl import GL, compile_program, ensure_context, read_pixels
 from engine.errors import InputError
 
 KIND_EMPTY, KIND_BODY, KIND_SIDE = 0, 1, 2
+SEGMENT_GROWTH_RINGS = 3  # face rings a segment map reaches into its neighbours (~3 cm)
 
 
 @dataclass
@@ -198,7 +199,13 @@ class MapRenderer:
                 if name not in SEGMENT_ID:
                     raise InputError(f"unknown segment '{name}'; choose from {', '.join(SEGMENTS)}")
                 sid = SEGMENT_ID[name]
-                sel = (np.asarray(segments)[faces] == sid).any(axis=1)
+                # grow the segment a few rings into its neighbours: at a joint (the armpit
+                # crease) each segment's open cut would otherwise leave cloth between two slabs
+                mask = np.asarray(segments) == sid
+                for _ in range(SEGMENT_GROWTH_RINGS):
+                    touch = mask[faces].any(axis=1)
+                    mask[faces[touch].ravel()] = True
+                sel = mask[faces].any(axis=1)
                 if not sel.any():
                     raise InputError(f"segment '{name}' has no faces on this body")
                 subsets.append(faces[sel])

@@ -19,7 +19,7 @@ import numpy as np
 from engine.cloth.fabrics import get_fabric
 from engine.cloth.model import ClothModel, ClothParams, ClothState, build_model, weld_model
 from engine.cloth.solver import ClothSolver, Collider
-from engine.cloth.welds import hold_welds, merge_map, pull_seams, seam_gaps
+from engine.cloth.welds import hold_welds, merge_map, seam_gaps
 from engine.errors import InputError, SimulationError
 from engine.garment.garment import Garment
 
@@ -32,7 +32,7 @@ class DrapeOptions:
     dt: float | None = None  # None: the eq. 4 bound
     force_dt: bool = False
     params: ClothParams = field(default_factory=ClothParams)
-    weld_gap: float | None = None  # m: a seam pair this close is welded (None: half the cloth edge)
+    weld_gap: float | None = None  # m: a seam pair this close is welded (None: one cloth edge)
     sew_tau: float = 0.02  # s: a seam pair is pulled to close its gap in this time ...
     sew_vmax: float = 3.0  # m/s: ... at most this fast
     sew_damping: float = 20.0  # x the viscous damping while sewing (no flapping)
@@ -40,7 +40,7 @@ class DrapeOptions:
     sew_gravity: float = 1.0  # x gravity while sewing (a flared skirt without gravity opens into a disc)
     drape_damping: float = 250.0  # x the viscous damping while draping (a static result: settle)
     gravity_ramp: float = 0.3  # s: gravity grows from 0 to g over this long (no jolt when it starts)
-    sew_budget: float = 3.0  # s of simulated time
+    sew_budget: float = 4.0  # s of simulated time
     drape_budget: float = 4.0  # s of simulated time
     drape_min: float = 0.5  # s: drape at least this long after sewing
     settle_speed: float = 0.005  # m/s: RMS drift of the vertices over a window ...
@@ -87,14 +87,13 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
         welded = np.zeros(len(pairs), dtype=np.bool_)
         gaps = np.zeros(len(pairs))
         budget = int(np.ceil(o.sew_budget / dt))
-        weld_gap = o.weld_gap if o.weld_gap is not None else 0.5 * _edge(garment)
+        weld_gap = o.weld_gap if o.weld_gap is not None else 1.0 * _edge(garment)
         gap0 = float(seam_gaps(state.x, pairs, gaps).max())
         check_every = max(1, int(0.005 / dt))
         solver.strain_guard = None  # sewing stretches cloth by design; the guard and the strain
         solver.recover = 1e9  # recovery are for the drape (a new solver is made after welding)
+        solver.sewing = (pairs, welded, o.sew_tau, o.sew_vmax)
         for it in range(budget):
-            pull_seams(state.x, state.v, model.mass, pairs, welded, o.sew_tau, o.sew_vmax, solver.contact,
-                       solver.contact_n)
             g = o.sew_gravity * min(1.0, (it + 1) * dt / o.gravity_ramp)  # let the seams catch first
             solver.step(state, gravity_scale=g, damping_scale=o.sew_damping, friction_scale=o.sew_friction)
             hold_welds(state.x, state.v, model.mass, pairs, welded)
