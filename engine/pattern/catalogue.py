@@ -212,12 +212,12 @@ def skirt(f: Fit) -> Made:
 
 
 def _bodice(f: Fit, length: float, bust_ease: float, waist_ease: float | None, hip_ease: float,
-            flare: float, neck_front: float, shoulder: float = -1.0) -> tuple[Outline, Outline, dict]:
+            flare: float, neck_front: float, shoulder: float = -2.5) -> tuple[Outline, Outline, dict]:
     """Front and back bodice outlines (the front neckline deeper), v = 0 at the neck point;
     side seams split at the underarm, waist and hip levels that lie above the hem.
     shoulder: where the shoulder seam ends, cm beyond the shoulder point (-1: a strap inside it,
     off the deltoid; a sleeved bodice reaches the arm)."""
-    nw = 0.045 * f.height
+    nw = 0.05 * f.height  # half the neckline width: clears the neck of an average adult
     sw = f.shoulder_w / 2 + shoulder
     slope = 4.0
     ad = f.shoulder_h + slope - f.armpit_h  # armhole depth below the neck point
@@ -251,7 +251,7 @@ def _bodice(f: Fit, length: float, bust_ease: float, waist_ease: float | None, h
 
 
 def _torso_garment(f: Fit, length: float, bust_ease: float, waist_ease, hip_ease: float, flare: float,
-                   neck_front: float, shoulder: float = -1.0):
+                   neck_front: float, shoulder: float = -2.5):
     fo, bo, info = _bodice(f, length, bust_ease, waist_ease, hip_ease, flare, neck_front, shoulder)
     front, fi = fo.panel()
     back, bi = bo.panel(reverse=True)
