@@ -212,7 +212,7 @@ def skirt(f: Fit) -> Made:
 
 
 def _bodice(f: Fit, length: float, bust_ease: float, waist_ease: float | None, hip_ease: float,
-            flare: float, neck_front: float, shoulder: float = -2.5) -> tuple[Outline, Outline, dict]:
+            flare: float, neck_front: float, shoulder: float = -1.0) -> tuple[Outline, Outline, dict]:
     """Front and back bodice outlines (the front neckline deeper), v = 0 at the neck point;
     side seams split at the underarm, waist and hip levels that lie above the hem.
     shoulder: where the shoulder seam ends, cm beyond the shoulder point (-1: a strap inside it,
@@ -251,7 +251,7 @@ def _bodice(f: Fit, length: float, bust_ease: float, waist_ease: float | None, h
 
 
 def _torso_garment(f: Fit, length: float, bust_ease: float, waist_ease, hip_ease: float, flare: float,
-                   neck_front: float, shoulder: float = -2.5):
+                   neck_front: float, shoulder: float = -1.0):
     fo, bo, info = _bodice(f, length, bust_ease, waist_ease, hip_ease, flare, neck_front, shoulder)
     front, fi = fo.panel()
     back, bi = bo.panel(reverse=True)
