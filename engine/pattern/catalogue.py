@@ -162,9 +162,27 @@ def _fit(body: Body, size: str) -> Fit:
         raise InputError(f"the body's landmarks ({', '.join(bad)}) could not be measured; catalogue "
                          "garments need them to be placed (check `tryon body info`)")
     sw = m.shoulder_width if np.isfinite(m.shoulder_width) else 0.21 * m.height
-    return Fit(bust, waist, hips, 100 * m.height, 100 * m.shoulder_height, 100 * m.waist_height,
+    fit = Fit(bust, waist, hips, 100 * m.height, 100 * m.shoulder_height, 100 * m.waist_height,
                100 * m.hip_height, 100 * m.crotch_height, 100 * m.knee_height, 100 * sw,
                100 * (m.shoulder_height - 0.12 * m.height), _arm_joints(body), chart is MEN)
+    fit.neck_h = 100 * _side_neck_height(body, 0.05 * m.height, m.shoulder_height)
+    return fit
+
+
+def _side_neck_height(body: Body, nw: float, shoulder_h: float) -> float:
+    """Height (m) of the body's top surface where the neckline's side point sits (|x| = nw):
+    the top of the trapezius, higher above the shoulder point on some bodies than others."""
+    v = body.vertices
+    sel = (np.abs(np.abs(v[:, 0]) - nw) < 0.01) & (v[:, 1] > shoulder_h - 0.02) & (v[:, 1] < shoulder_h + 0.2)
+    if not sel.any():
+        return shoulder_h + 0.04
+    # the neck itself rises at |x| < nw; at |x| = nw the highest point below the neck's steep
+    # wall is the shoulder line: take the highest vertex whose neighbours there are not much higher
+    ys = np.sort(v[sel, 1])
+    gaps = np.diff(ys)
+    cut = np.flatnonzero(gaps > 0.015)  # a jump: the neck's wall above the shoulder line
+    top = ys[cut[0]] if len(cut) else ys[-1]
+    return float(min(max(top, shoulder_h + 0.02), shoulder_h + 0.10))
 
 
 ARM_JOINTS = (("upperarm01", "shoulder01"), ("lowerarm01",), ("wrist",))
@@ -219,7 +237,7 @@ def _bodice(f: Fit, length: float, bust_ease: float, waist_ease: float | None, h
     off the deltoid; a sleeved bodice reaches the arm)."""
     nw = 0.05 * f.height  # half the neckline width: clears the neck of an average adult
     sw = f.shoulder_w / 2 + shoulder
-    slope = 4.0
+    slope = max(4.0, getattr(f, "neck_h", f.shoulder_h + 4.0) + 1.0 - f.shoulder_h)  # neck point 1 cm above the body
     ad = f.shoulder_h + slope - f.armpit_h  # armhole depth below the neck point
     wb = (f.bust + bust_ease) / 4
     left = [(-wb, -ad)]
