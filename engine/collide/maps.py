@@ -38,7 +38,8 @@ from engine.collide.gl import GL, compile_program, ensure_context, read_pixels
 from engine.errors import InputError
 
 KIND_EMPTY, KIND_BODY, KIND_SIDE = 0, 1, 2
-SEGMENT_GROWTH_RINGS = 3  # face rings a segment map reaches into its neighbours (~3 cm)
+SEGMENT_GROWTH_RINGS = 0  # rings a segment map reaches into its neighbours; 3 closed the armpit
+# crease (7.7 mm penetration) but let the arm maps push shoulder straps off while sewing: off
 
 
 @dataclass

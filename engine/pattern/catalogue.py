@@ -165,7 +165,7 @@ def _fit(body: Body, size: str) -> Fit:
     fit = Fit(bust, waist, hips, 100 * m.height, 100 * m.shoulder_height, 100 * m.waist_height,
                100 * m.hip_height, 100 * m.crotch_height, 100 * m.knee_height, 100 * sw,
                100 * (m.shoulder_height - 0.12 * m.height), _arm_joints(body), chart is MEN)
-    fit.neck_h = 100 * _side_neck_height(body, 0.05 * m.height, m.shoulder_height)
+    fit.neck_h = 100 * _side_neck_height(body, 0.045 * m.height, m.shoulder_height)
     return fit
 
 
@@ -235,7 +235,7 @@ def _bodice(f: Fit, length: float, bust_ease: float, waist_ease: float | None, h
     side seams split at the underarm, waist and hip levels that lie above the hem.
     shoulder: where the shoulder seam ends, cm beyond the shoulder point (-1: a strap inside it,
     off the deltoid; a sleeved bodice reaches the arm)."""
-    nw = 0.05 * f.height  # half the neckline width: clears the neck of an average adult
+    nw = 0.045 * f.height  # half the neckline width
     sw = f.shoulder_w / 2 + shoulder
     slope = max(4.0, getattr(f, "neck_h", f.shoulder_h + 4.0) + 1.0 - f.shoulder_h)  # neck point 1 cm above the body
     ad = f.shoulder_h + slope - f.armpit_h  # armhole depth below the neck point
