@@ -19,9 +19,11 @@ Sources (typical values; real bolts vary by +-30 %):
 - Strain thresholds for the velocity modification (seed 003 §4.3 uses 1-15 % by fabric type):
   about the strain a garment shows in wear — small for woven fabrics, larger for knits.
 
-The simulation uses the measured stretch stiffness times `ClothParams.stiffness_scale` (default
-0.01): the velocity modification caps the strain at the threshold however soft the springs are,
-which is the point of seed 003 §4 — softer springs allow a larger stable time step (eq. 4).
+The simulation uses the measured stretch and shear stiffness times `ClothParams.stiffness_scale`
+(default 0.03): the velocity modification caps the strain at the threshold, which is the point of
+seed 003 §4 -- softer springs allow a larger stable time step (eq. 4). Measured here: much softer
+springs (0.0005-0.002) let the strain limit lose where the body pushes cloth outward (a waistband
+on the hips, 20-25 % strain), so the default stays at 0.03.
 """
 
 from __future__ import annotations

@@ -1,9 +1,12 @@
 """Dress a standing body (seed 003 end to end): sew the placed panels, then drape.
 
 Stages end on measured conditions within a bounded budget of simulated time:
-- sew: gravity and friction off (the panels slide over the body into place), seam forces pull stitch pairs together; a pair closer than `weld_gap` is
-  welded (moves as one point); when every pair is welded the sewn vertices are merged. If the
-  budget runs out first, SimulationError names the seams that stayed open and their gaps.
+- sew: friction off (the panels slide over the body into place), gravity ramped in over
+  `gravity_ramp` so the seams catch before the panels fall; each open stitch pair is given the
+  relative velocity that closes it in `sew_tau` (a velocity modification, after the strain limit
+  and before the collision response); a pair closer than `weld_gap` is welded (moves as one
+  point); when every pair is welded the sewn vertices are merged. If the budget runs out first,
+  SimulationError names the seams that stayed open and their gaps.
 - drape: gravity on until the cloth's shape stops moving: RMS vertex displacement over
   `settle_time`, as a speed, below `settle_speed` twice in a row.
 """
