@@ -13,6 +13,7 @@ demo: setup
 	$(VENV)/tryon body info default:female
 	$(VENV)/tryon maps default:female --out $(OUT)/maps
 	$(VENV)/tryon render default:female --out $(OUT)/default_female.png
+	$(VENV)/tryon drape --body default:female --garment skirt --size M --out $(OUT)/skirt
 	@echo "demo: pictures in $(OUT)/"
 
 test: setup
