@@ -252,20 +252,22 @@ def _bodice(f: Fit, length: float, bust_ease: float, waist_ease: float | None, h
     n = len(left) - 1
     side = [(f"side_l{i + 1}", f"side_r{i + 1}") for i in range(n)]
 
-    def one(neck_depth):
+    def one(neck_depth, scoop):
+        # scoop: how far inside the underarm point the armhole curve bows (cm); the back is
+        # cut fuller than the front, over the shoulder blades
         o = Outline((nw, 0)).curve((0.2 * nw, -1.1 * neck_depth), (-nw, 0), "neck")
         o.line((-sw, -slope), "shoulder_l")
-        o.curve((-wb + 1.0, -0.75 * ad), left[0], "arm_l")
+        o.curve((-wb + scoop, -0.75 * ad), left[0], "arm_l")
         for i in range(1, n + 1):
             o.line(left[i], f"side_l{i}")
         o.line((-left[n][0], left[n][1]), "hem")
         for i in range(n - 1, -1, -1):
             o.line((-left[i][0], left[i][1]), f"side_r{i + 1}")
-        o.curve((wb - 1.0, -0.75 * ad), (sw, -slope), "arm_r")
+        o.curve((wb - scoop, -0.75 * ad), (sw, -slope), "arm_r")
         o.close("shoulder_r")
         return o
 
-    return one(neck_front), one(2.0), {"side": side, "top": (f.shoulder_h + slope) / 100}
+    return one(neck_front, 1.0), one(2.0, -0.5), {"side": side, "top": (f.shoulder_h + slope) / 100}
 
 
 def _torso_garment(f: Fit, length: float, bust_ease: float, waist_ease, hip_ease: float, flare: float,
