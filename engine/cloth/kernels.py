@@ -20,12 +20,9 @@ VM_MODES = {"zero": VM_ZERO, "average": VM_AVERAGE, "directional": VM_DIRECTIONA
 
 
 @njit(fastmath=True, cache=True)
-def eval_forces_and_integrate(x, v, inv_mass, mass, ptr, other, sid, rest, k,
-                              seam_ptr, seam_other, k_seam, seam_fmax, gravity, damping,
+def eval_forces_and_integrate(x, v, inv_mass, mass, ptr, other, sid, rest, k, gravity, damping,
                               contact, contact_n, mu, dt, f_out):
-    """Per vertex: springs (eq. 2), seam pull (zero-rest-length springs whose force is capped at
-    seam_fmax so wide-open seams close at a bounded speed), gravity, viscous
-    damping, then the reaction force of seed 000 eq. 16 where the vertex touched the body in
+    """Per vertex: springs (eq. 2), gravity, viscous damping, then the reaction force of seed 000 eq. 16 where the vertex touched the body in
     the previous step (cancel the force into the body, Coulomb friction on the tangential part),
     then the velocity half of eq. 3: v += dt f / m. f_out keeps the force for diagnostics."""
     n = x.shape[0]
@@ -45,18 +42,6 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, ptr, other, sid, rest, k,
                 fx += c * dx
                 fy += c * dy
                 fz += c * dz
-        for e in range(seam_ptr[i], seam_ptr[i + 1]):
-            j = seam_other[e]
-            dx = x[j, 0] - x[i, 0]
-            dy = x[j, 1] - x[i, 1]
-            dz = x[j, 2] - x[i, 2]
-            c = k_seam
-            pull = k_seam * np.sqrt(dx * dx + dy * dy + dz * dz)
-            if pull > seam_fmax:
-                c *= seam_fmax / pull
-            fx += c * dx
-            fy += c * dy
-            fz += c * dz
         if contact[i]:
             nx, ny, nz = contact_n[i, 0], contact_n[i, 1], contact_n[i, 2]
             fn = fx * nx + fy * ny + fz * nz
@@ -220,49 +205,30 @@ def provot_positions(x, springs, rest, active, threshold, inv_mass, passes, work
 
 
 @njit(fastmath=True, cache=True)
-def collision_points(x, v, dt, quads, tris, p_out, pv_out):
-    """Points checked against the body: every vertex, every quad midpoint and triangle centroid
-    (face-body checks, seed 003 §6), at their predicted positions x + dt v."""
-    n = x.shape[0]
+def point_average(a, quads, tris, out):
+    """A per-vertex field (N, 3) at the checked points: the vertices, then quad midpoints, then
+    triangle centroids (seed 003 §6's face-body checks), into out (N + Q + T, 3)."""
+    n = a.shape[0]
     nq = quads.shape[0]
     for i in range(n):
         for c in range(3):
-            p_out[i, c] = x[i, c] + dt * v[i, c]
-            pv_out[i, c] = v[i, c]
+            out[i, c] = a[i, c]
     for q in range(nq):
         for c in range(3):
-            sx = 0.0
-            sv = 0.0
-            for r in range(4):
-                sx += x[quads[q, r], c]
-                sv += v[quads[q, r], c]
-            pv_out[n + q, c] = 0.25 * sv
-            p_out[n + q, c] = 0.25 * sx + dt * 0.25 * sv
+            out[n + q, c] = 0.25 * (a[quads[q, 0], c] + a[quads[q, 1], c] + a[quads[q, 2], c] + a[quads[q, 3], c])
     for t in range(tris.shape[0]):
         for c in range(3):
-            sx = 0.0
-            sv = 0.0
-            for r in range(3):
-                sx += x[tris[t, r], c]
-                sv += v[tris[t, r], c]
-            pv_out[n + nq + t, c] = sv / 3.0
-            p_out[n + nq + t, c] = sx / 3.0 + dt * sv / 3.0
+            out[n + nq + t, c] = (a[tris[t, 0], c] + a[tris[t, 1], c] + a[tris[t, 2], c]) / 3.0
 
 
 @njit(fastmath=True, cache=True)
-def point_velocities(v, quads, tris, pv_out):
-    """Velocities of the checked points (vertices, quad midpoints, triangle centroids) from v."""
-    n = v.shape[0]
-    nq = quads.shape[0]
-    for i in range(n):
+def collision_points(x, v, dt, quads, tris, p_out, pv_out):
+    """The checked points at their predicted positions x + dt v, and their velocities."""
+    point_average(x, quads, tris, p_out)
+    point_average(v, quads, tris, pv_out)
+    for p in range(p_out.shape[0]):
         for c in range(3):
-            pv_out[i, c] = v[i, c]
-    for q in range(nq):
-        for c in range(3):
-            pv_out[n + q, c] = 0.25 * (v[quads[q, 0], c] + v[quads[q, 1], c] + v[quads[q, 2], c] + v[quads[q, 3], c])
-    for t in range(tris.shape[0]):
-        for c in range(3):
-            pv_out[n + nq + t, c] = (v[tris[t, 0], c] + v[tris[t, 1], c] + v[tris[t, 2], c]) / 3.0
+            p_out[p, c] += dt * pv_out[p, c]
 
 
 @njit(fastmath=True, cache=True)

@@ -20,7 +20,7 @@ from typing import Protocol
 import numpy as np
 
 from engine.cloth import kernels as K
-from engine.cloth.model import FLEXION, ClothModel, ClothState, csr_adjacency
+from engine.cloth.model import FLEXION, ClothModel, ClothState
 from engine.cloth.welds import pull_seams
 from engine.errors import InputError
 
@@ -61,7 +61,6 @@ class ClothSolver:
         m = n + len(model.quads) + len(model.tris)
         self.points = np.zeros((m, 3))
         self.point_v = np.zeros((m, 3))
-        self.set_seams(model.seams, 0.0)
         self.timing = {"cloth": 0.0, "collision": 0.0}
         self.iterations = 0
         self.last_hits = 0
@@ -69,25 +68,13 @@ class ClothSolver:
         self.recover = p.recover  # ... and the strain recovery (it would fight the seam pull)
         self.sewing = None  # (pairs, welded, tau, vmax) while sewing: see engine.cloth.welds
 
-    def set_seams(self, pairs: np.ndarray, k_seam: float, fmax: float = np.inf) -> None:
-        """Seam forces: zero-rest-length springs of stiffness k_seam between sewn vertex pairs,
-        each pull capped at fmax newtons."""
-        n = self.model.n
-        if len(pairs):
-            self.seam_ptr, self.seam_other, _ = csr_adjacency(n, pairs.astype(np.int64))
-        else:
-            self.seam_ptr, self.seam_other = np.zeros(n + 1, np.int64), np.zeros(0, np.int32)
-        self.k_seam = float(k_seam)
-        self.seam_fmax = float(fmax)
-
     def step(self, state: ClothState, gravity_scale: float = 1.0, damping_scale: float = 1.0,
              friction_scale: float = 1.0) -> None:
         m, p, dt = self.model, self.model.params, self.dt
         t0 = time.perf_counter()
-        # forces (eq. 2, gravity, damping, seams, reaction eq. 16) and v += dt a (eq. 3)
+        # forces (eq. 2, gravity, damping, reaction eq. 16) and v += dt a (eq. 3)
         K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, m.adj_ptr, m.adj_other,
-                                    m.adj_spring, m.rest, m.stiffness, self.seam_ptr, self.seam_other,
-                                    self.k_seam, self.seam_fmax, self.gravity * gravity_scale,
+                                    m.adj_spring, m.rest, m.stiffness, self.gravity * gravity_scale,
                                     p.damping * damping_scale,
                                     self.contact, self.contact_n, m.fabric.friction * friction_scale, dt, self.f)
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 §3)
@@ -110,11 +97,11 @@ class ClothSolver:
             # collision response so nothing moves into the body.
             for r in range(p.contact_rounds):
                 if r > 0:
-                    K.point_velocities(state.v, m.quads, m.tris, self.point_v)
+                    K.point_average(state.v, m.quads, m.tris, self.point_v)
                     K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active,
                                         m.fabric.strain_threshold, self.mode, self.gravity * gravity_scale, dt,
                                         self.body_v, p.vm_passes, self.vm_work, self.recover, n_act)
-                    K.point_velocities(state.v, m.quads, m.tris, self.point_v)
+                    K.point_average(state.v, m.quads, m.tris, self.point_v)
                 self.last_hits = K.collision_response(state.v, status, normal, bvel, depth, self.point_v, m.n,
                                                       m.quads, m.tris, p.tolerance, p.reflection,
                                                       m.fabric.friction * friction_scale, dt, self.contact,

@@ -5,9 +5,9 @@ Torso and hip panels are wrapped onto an elliptic cylinder around the body: at e
 ellipse is the body's cross-section (torso and legs, never the arms) grown by a clearance and,
 where the garment is wider than that, grown until the panel's width spans half of it. A panel's
 horizontal coordinate is laid out as arc length from the front (or back) centre line, so front and
-back panels meet at the sides and the side seams start almost closed. Sleeves are wrapped onto a
-circular cylinder around the arm's axis with their underarm seam underneath (wrap_sleeve: the
-same on tubes around the arm's smoothed, elbow-bent centre line). Trouser panels wrap the torso
+back panels meet at the sides and the side seams start almost closed. Sleeves are wrapped onto tubes
+around the arm's smoothed, elbow-bent centre line with their underarm seam underneath
+(wrap_sleeve). Trouser panels wrap the torso
 above the crotch and their own leg below it, blended over 10 cm (wrap_trousers, LegSections).
 """
 
@@ -18,7 +18,7 @@ import numpy as np
 from engine.body.measure import slice_stack
 from engine.body.types import SEGMENTS, Body
 from engine.errors import InputError
-from engine.pattern.spec import Panel, PanelHint
+from engine.pattern.spec import PanelHint
 
 CLEARANCE = 0.02  # m between the body and a freshly placed panel
 
@@ -132,37 +132,6 @@ def _width_at(outline: np.ndarray, v: float) -> float:
     return float(xs.max() - xs.min())
 
 
-def wrap_arm(uv: np.ndarray, shoulder: np.ndarray, wrist: np.ndarray, radius: float, side: str) -> np.ndarray:
-    """(n, 2) sleeve points (v = 0 at the cap top, negative toward the cuff; u around the arm,
-    u = 0 on top of the arm) -> (n, 3) on a cylinder of `radius` around shoulder->wrist, the
-    underarm seam (u = +-half circumference) under the arm."""
-    axis = wrist - shoulder
-    length = np.linalg.norm(axis)
-    if length < 0.1:
-        raise InputError("could not find the arm's axis to place a sleeve")
-    ax = axis / length
-    # 'up' around the arm: world up made perpendicular to the arm axis
-    up = np.array([0.0, 1.0, 0.0]) - ax[1] * ax
-    up /= np.linalg.norm(up)
-    fwd = np.cross(ax, up) if side == "left" else np.cross(up, ax)
-    if fwd[2] < 0:
-        fwd = -fwd
-    theta = uv[:, 0] / radius
-    # u > 0 goes toward the front of the arm
-    ring = np.cos(theta)[:, None] * up + np.sin(theta)[:, None] * fwd
-    along = -uv[:, 1]  # v is negative toward the cuff
-    return shoulder + along[:, None] * ax + radius * ring
-
-
-def panel_outline_2d(panel: Panel, scale: float) -> np.ndarray:
-    from engine.pattern import geometry as geo
-
-    return geo.outline(panel, scale)
-
-
-# ------------------------------------------------------------------ sleeves on a bent arm
-
-
 def arm_path(points: np.ndarray, step: float = 0.005, smooth: float = 0.06) -> np.ndarray:
     """(K, 3) arm axis polyline (cap start, elbow, wrist) -> (M, 3) points every `step` metres,
     smoothed over `smooth` metres so that a sleeve wrapped around it has no crease at the elbow.
@@ -234,7 +203,7 @@ def arm_radius_profile(arm_vertices: np.ndarray, path: np.ndarray, origin: int,
 
 
 def wrap_sleeve(uv: np.ndarray, path: np.ndarray, origin: int, radius: np.ndarray) -> np.ndarray:
-    """wrap_arm on a bent arm: (n, 2) sleeve points (v = 0 at the cap top, negative toward the
+    """A sleeve on a bent arm: (n, 2) sleeve points (v = 0 at the cap top, negative toward the
     cuff; u around the arm, u = 0 on top, u > 0 toward the front) -> (n, 3) on tubes around the
     smoothed axis `path` (from arm_path), whose point `origin` is at v = 0; radius: (n,) the tube
     radius at each point (m). The underarm seam (u = +-half the width) lies under the arm."""

@@ -17,7 +17,6 @@ Each garment is a GarmentCode specification (cm) plus a placement function from 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np

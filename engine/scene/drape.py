@@ -23,7 +23,7 @@ from engine.cloth.fabrics import get_fabric
 from engine.cloth.model import ClothModel, ClothParams, ClothState, build_model, weld_model
 from engine.cloth.solver import ClothSolver, Collider
 from engine.cloth.welds import hold_welds, merge_map, seam_gaps
-from engine.errors import InputError, SimulationError
+from engine.errors import SimulationError
 from engine.garment.garment import Garment
 
 Progress = Callable[[str, float, str], None]  # (stage, fraction 0..1, message)

@@ -20,11 +20,9 @@ def resolve_garment(arg: str, body: Body, size: str | None = "M"):
         spec = load_pattern(path)
         return spec, None, path.name
     size = size or "M"
-    try:
-        from engine.pattern.catalogue import CATALOGUE, make_garment
-    except ImportError:  # the catalogue is not built yet
-        CATALOGUE, make_garment = {}, None
+    from engine.pattern.catalogue import CATALOGUE, make_garment
+
     if arg in CATALOGUE:
         return make_garment(arg, body, size)
-    names = ", ".join(CATALOGUE) or "(none yet)"
+    names = ", ".join(CATALOGUE)
     raise InputError(f"garment '{arg}' is neither a pattern file nor a catalogue garment ({names})")
