@@ -298,3 +298,55 @@ def test_fabrics_are_physical():
         assert 0 < f.friction < 1 and 0 < f.strain_threshold < 0.5
     assert FABRICS["denim"].density > FABRICS["cotton"].density > FABRICS["silk"].density
     assert FABRICS["jersey"].strain_threshold > FABRICS["cotton"].strain_threshold
+
+
+def test_stale_contacts_carry_the_last_answer_forward():
+    # three points answered at the query: in the band (depth 2 mm, normal +z), clear, inside
+    q_pts = np.zeros((3, 3))
+    q_st = np.array([1, 0, 2], np.int8)
+    q_n = np.array([[0, 0, 1.0], [0, 0, 1.0], [1.0, 0, 0]])
+    q_d = np.array([0.002, -0.01, 0.004])
+    st, d = np.zeros(3, np.int8), np.zeros(3)
+    # point 0 moved 3 mm out along its normal (leaves the band), point 2 moved 1 mm deeper
+    pts = q_pts + np.array([[0, 0, 0.003], [0.0005, 0, 0], [-0.001, 0, 0]])
+    moved = K.stale_contacts(pts, q_pts, q_st, q_n, q_d, st, d)
+    assert moved == pytest.approx(0.003)
+    assert st.tolist() == [0, 0, 2]
+    assert d[0] == pytest.approx(-0.001) and d[2] == pytest.approx(0.005)
+
+
+class _CountingCollider:
+    """A flat floor at y = 0 (status/normal/depth like the maps), counting its queries."""
+
+    def __init__(self):
+        self.calls, self.version = 0, 0
+
+    def query(self, p):
+        self.calls += 1
+        tol = 0.005
+        depth = tol - p[:, 1]
+        st = np.where(depth > tol, 2, np.where(depth > 0, 1, 0)).astype(np.int8)
+        n = np.zeros_like(p)
+        n[:, 1] = 1.0
+        return st, n, np.zeros_like(p), depth
+
+
+def test_solver_requeries_when_the_body_moves_or_points_travel(garment):
+    m = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
+                    get_fabric("cotton"), H, ClothParams(requery_every=8, requery_move=0.001))
+    x = garment.positions.copy()
+    x[:, 1] += 0.5 - x[:, 1].min()  # unstretched, at rest, far above the floor: answers are reused
+    s = ClothSolver(m, _CountingCollider(), gravity=np.zeros(3))
+    st = ClothState(x, np.zeros_like(x))
+    for _ in range(16):
+        s.step(st)
+    assert s.collider.calls == 2
+    s.collider.version += 1  # the body moved: ask again at once
+    s.step(st)
+    assert s.collider.calls == 3
+    st.v[:] = [0.0, -1.0, 0.0]  # 1 m/s: a millimetre in a few steps -> asked more often
+    calls = s.collider.calls
+    for _ in range(16):
+        s.step(st)
+    travelled = 16 * m.dt_bound * 1.0  # metres each point moved in these steps
+    assert int(travelled / 0.001) <= s.collider.calls - calls <= int(travelled / 0.001) + 1 < 8

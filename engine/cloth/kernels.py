@@ -4,8 +4,7 @@ Serial on purpose (measured): on this 2-core machine a parallel step kernel save
 machine is idle and is 10-600x slower when another process holds a core (numba's workers wait
 for the descheduled one) -- and a try-on service runs several jobs at once.
 
-Arrays: x, v (N, 3) float64; springs given as CSR vertex adjacency (ptr (N+1,), other, sid)
-so force evaluation is a race-free gather, parallel over vertices.
+Arrays: x, v (N, 3) float64; springs (S, 2) int32 with rest lengths and stiffness (S,).
 """
 
 from __future__ import annotations
@@ -20,28 +19,35 @@ VM_MODES = {"zero": VM_ZERO, "average": VM_AVERAGE, "directional": VM_DIRECTIONA
 
 
 @njit(fastmath=True, cache=True)
-def eval_forces_and_integrate(x, v, inv_mass, mass, ptr, other, sid, rest, k, gravity, damping,
+def eval_forces_and_integrate(x, v, inv_mass, mass, springs, rest, k, gravity, damping,
                               contact, contact_n, mu, dt, f_out):
-    """Per vertex: springs (eq. 2), gravity, viscous damping, then the reaction force of seed 000 eq. 16 where the vertex touched the body in
-    the previous step (cancel the force into the body, Coulomb friction on the tangential part),
-    then the velocity half of eq. 3: v += dt f / m. f_out keeps the force for diagnostics."""
+    """Springs (eq. 2) -- one pass over the springs, each adding its force to both ends (serial,
+    so the scatter is race-free and every length is computed once) -- gravity, viscous damping,
+    then the reaction force of seed 000 eq. 16 where the vertex touched the body in the previous
+    step (cancel the force into the body, Coulomb friction on the tangential part), then the
+    velocity half of eq. 3: v += dt f / m. f_out keeps the force for diagnostics."""
     n = x.shape[0]
     for i in range(n):
-        fx = mass[i] * gravity[0] - damping * mass[i] * v[i, 0]
-        fy = mass[i] * gravity[1] - damping * mass[i] * v[i, 1]
-        fz = mass[i] * gravity[2] - damping * mass[i] * v[i, 2]
-        for e in range(ptr[i], ptr[i + 1]):
-            j = other[e]
-            s = sid[e]
-            dx = x[j, 0] - x[i, 0]
-            dy = x[j, 1] - x[i, 1]
-            dz = x[j, 2] - x[i, 2]
-            length = np.sqrt(dx * dx + dy * dy + dz * dz)
-            if length > 1e-12:
-                c = k[s] * (length - rest[s]) / length
-                fx += c * dx
-                fy += c * dy
-                fz += c * dz
+        f_out[i, 0] = mass[i] * gravity[0] - damping * mass[i] * v[i, 0]
+        f_out[i, 1] = mass[i] * gravity[1] - damping * mass[i] * v[i, 1]
+        f_out[i, 2] = mass[i] * gravity[2] - damping * mass[i] * v[i, 2]
+    for s in range(springs.shape[0]):
+        a = springs[s, 0]
+        b = springs[s, 1]
+        dx = x[b, 0] - x[a, 0]
+        dy = x[b, 1] - x[a, 1]
+        dz = x[b, 2] - x[a, 2]
+        length = np.sqrt(dx * dx + dy * dy + dz * dz)
+        if length > 1e-12:
+            c = k[s] * (length - rest[s]) / length
+            f_out[a, 0] += c * dx
+            f_out[a, 1] += c * dy
+            f_out[a, 2] += c * dz
+            f_out[b, 0] -= c * dx
+            f_out[b, 1] -= c * dy
+            f_out[b, 2] -= c * dz
+    for i in range(n):
+        fx, fy, fz = f_out[i, 0], f_out[i, 1], f_out[i, 2]
         if contact[i]:
             nx, ny, nz = contact_n[i, 0], contact_n[i, 1], contact_n[i, 2]
             fn = fx * nx + fy * ny + fz * nz
@@ -53,13 +59,37 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, ptr, other, sid, rest, k, gr
                 if ft > 1e-20:
                     scale = max(0.0, 1.0 - mu * (-fn) / ft)
                 fx, fy, fz = tx * scale, ty * scale, tz * scale
-        f_out[i, 0] = fx
-        f_out[i, 1] = fy
-        f_out[i, 2] = fz
+                f_out[i, 0] = fx
+                f_out[i, 1] = fy
+                f_out[i, 2] = fz
         w = dt * inv_mass[i]
         v[i, 0] += w * fx
         v[i, 1] += w * fy
         v[i, 2] += w * fz
+
+
+@njit(fastmath=True, cache=True)
+def stale_contacts(points, q_points, q_status, q_normal, q_depth, status, depth):
+    """Between two map queries: carry each checked point's last answer forward, its depth
+    corrected by how far it moved along the normal since the query (a point that left the band
+    becomes clear). Returns the largest distance a point moved since the query, so the caller
+    queries again before anything could have crossed the band unseen."""
+    far = 0.0
+    for p in range(points.shape[0]):
+        dx = points[p, 0] - q_points[p, 0]
+        dy = points[p, 1] - q_points[p, 1]
+        dz = points[p, 2] - q_points[p, 2]
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 > far:
+            far = d2
+        st = q_status[p]
+        if st == 0:
+            status[p] = 0
+            continue
+        d = q_depth[p] - (dx * q_normal[p, 0] + dy * q_normal[p, 1] + dz * q_normal[p, 2])
+        depth[p] = d
+        status[p] = st if d > 0.0 else 0
+    return np.sqrt(far)
 
 
 @njit(fastmath=True, cache=True)

@@ -44,6 +44,8 @@ class ClothParams:
     vm_passes: int = 12  # Gauss-Seidel passes (over the over-elongated springs) per step
     contact_rounds: int = 4  # alternations of strain limit and collision response per step
     recover: float = 0.002  # s: a spring's excess over the strain limit is worked off over this long
+    requery_move: float = 0.001  # m: the maps are asked again once a checked point moved this far ...
+    requery_every: int = 8  # ... or after this many steps (between queries the answers are carried)
     strain_guard: float | None = None  # optional: positions of springs past threshold + this are
     # projected back (Provot) -- off by default: it fights the collision response (measured: jitter
     # of metres per second and 14 mm penetration on the sample skirt)

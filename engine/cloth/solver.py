@@ -67,20 +67,22 @@ class ClothSolver:
         self.strain_guard = p.strain_guard  # the drape turns it off while sewing
         self.recover = p.recover  # ... and the strain recovery (it would fight the seam pull)
         self.sewing = None  # (pairs, welded, tau, vmax) while sewing: see engine.cloth.welds
+        self._q, self._q_age, self._q_version = None, 0, None  # the last map answer (see _contacts)
 
     def step(self, state: ClothState, gravity_scale: float = 1.0, damping_scale: float = 1.0,
              friction_scale: float = 1.0) -> None:
         m, p, dt = self.model, self.model.params, self.dt
+        recover = max(self.recover, dt)  # work an excess off over at least one step (no overshoot)
         t0 = time.perf_counter()
         # forces (eq. 2, gravity, damping, reaction eq. 16) and v += dt a (eq. 3)
-        K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, m.adj_ptr, m.adj_other,
-                                    m.adj_spring, m.rest, m.stiffness, self.gravity * gravity_scale,
+        K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, m.springs, m.rest, m.stiffness,
+                                    self.gravity * gravity_scale,
                                     p.damping * damping_scale,
                                     self.contact, self.contact_n, m.fabric.friction * friction_scale, dt, self.f)
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 §3)
         n_act = K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
                                     self.mode, self.gravity * gravity_scale, dt, self.body_v, p.vm_passes,
-                                    self.vm_work, self.recover)
+                                    self.vm_work, recover)
         if self.sewing is not None:
             # sewing has priority over the strain limit (it stretches cloth near a seam by
             # design; the drape's strain recovery relaxes that), but not over the collision below
@@ -90,7 +92,7 @@ class ClothSolver:
         # collision detection and response (vertices and face midpoints, eq. 12/15)
         if self.collider is not None:
             K.collision_points(state.x, state.v, dt, m.quads, m.tris, self.points, self.point_v)
-            status, normal, bvel, depth = self.collider.query(self.points)
+            status, normal, bvel, depth = self._contacts()
             # The body's push and the strain limit can disagree (a waistband sliding down the hips
             # is pushed outward while it may not stretch): alternate the two velocity changes a
             # few rounds on the same contacts -- this converges to "stop sliding" -- and end on the
@@ -100,7 +102,7 @@ class ClothSolver:
                     K.point_average(state.v, m.quads, m.tris, self.point_v)
                     K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active,
                                         m.fabric.strain_threshold, self.mode, self.gravity * gravity_scale, dt,
-                                        self.body_v, p.vm_passes, self.vm_work, self.recover, n_act)
+                                        self.body_v, p.vm_passes, self.vm_work, recover, n_act)
                     K.point_average(state.v, m.quads, m.tris, self.point_v)
                 self.last_hits = K.collision_response(state.v, status, normal, bvel, depth, self.point_v, m.n,
                                                       m.quads, m.tris, p.tolerance, p.reflection,
@@ -121,6 +123,29 @@ class ClothSolver:
         self.timing["cloth"] += (t1 - t0) + (t3 - t2)
         self.timing["collision"] += t2 - t1
         self.iterations += 1
+
+    def _contacts(self):
+        """The collider's answer for self.points. Asking the maps is the costliest part of a step,
+        and at the eq. 4 time step a point moves a fraction of a millimetre per step, so the last
+        answer is carried forward (depth corrected along the normal, K.stale_contacts) until a
+        point moved `requery_move`, `requery_every` steps passed, or the body moved (the
+        collider's version changed). A point that was clear stays clear until then: it is at
+        most requery_move into the 5 mm band, where the response does not push yet."""
+        p = self.model.params
+        c = self.collider
+        ver = getattr(c, "version", None)
+        if self._q is not None and self._q_age < p.requery_every and ver == self._q_version:
+            q_pts, q_st, q_n, q_bv, q_d, st, d = self._q
+            moved = K.stale_contacts(self.points, q_pts, q_st, q_n, q_d, st, d)
+            if moved < p.requery_move:
+                self._q_age += 1
+                return st, q_n, q_bv, d
+        status, normal, bvel, depth = c.query(self.points)
+        if p.requery_every > 1:
+            self._q = (self.points.copy(), status.copy(), normal.copy(), bvel.copy(), depth.copy(),
+                       status.copy(), depth.copy())
+        self._q_age, self._q_version = 1, ver
+        return status, normal, bvel, depth
 
     def kinetic_energy(self, state: ClothState) -> float:
         return float(K.kinetic_energy(state.v, self.model.mass))

@@ -719,6 +719,7 @@ class ObjectSpaceCollider:
         self.bvh = MeshBVH(body_vertices, body_faces, vertex_velocities)
         self.tolerance = float(tolerance)
         self.max_distance = max_distance
+        self.version = 0  # bumped when the body moves (solvers re-query then)
         self._alloc(0)
 
     def _alloc(self, m):
@@ -730,6 +731,7 @@ class ObjectSpaceCollider:
     def update(self, body_vertices, vertex_velocities=None):
         """Next body frame (same topology): refit."""
         self.bvh.update(body_vertices, vertex_velocities)
+        self.version += 1
 
     def query(self, points):
         pts = _as_points(points)

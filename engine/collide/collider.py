@@ -18,9 +18,11 @@ class MapCollider:
         self.maps = maps
         self.tol = float(maps.tol if tol is None else tol)
         self._n = -1
+        self.version = 0  # bumped when the maps change (solvers re-query then)
 
     def set_maps(self, maps: CollisionMaps) -> None:
         self.maps = maps
+        self.version += 1
 
     def _alloc(self, n: int) -> None:
         self.status = np.zeros(n, np.int8)

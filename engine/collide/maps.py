@@ -389,6 +389,8 @@ class MapRenderer:
 
         kind = np.empty((ha, wa), np.int8)
         side_src = np.empty((ha, wa), np.int32)
+        if len(keep) > 1:  # segment maps: pixels where a segment's open mesh has one side only
+            _complete_one_sided(surf, vel, self.with_velocity, depth, depth.copy(), lay, geom)
         _finish_maps(surf, vel, self.with_velocity, depth, lay, self.ring, kind, side_src)
         return CollisionMaps(surf=surf, vel=vel, kind=kind, side_src=side_src, geom=geom,
                              layout=lay, segment_ids=self.segment_ids[keep].copy(), zrange=zr,
@@ -433,6 +435,54 @@ def _bbox(vertices, idx):
             lo[c] = min(lo[c], x)
             hi[c] = max(hi[c], x)
     return lo, hi
+
+
+@njit(cache=True)
+def _complete_one_sided(surf, vel, has_vel, depth, depth0, layout, geom):
+    """Segment maps render each segment's own triangles, and each camera only the triangles
+    turned toward it, so where the segments' open meshes meet (the shoulder: the deltoid's front
+    belongs to the arm, the upper back to the torso) a pixel can be covered by one camera only.
+    Such a pixel borrows the missing side from another segment map that has it at the same
+    world (x, y) -- the body there spans the torso's back face to the arm's front face -- and
+    is dropped (left empty) when none has it. depth0 is an unmodified copy of depth."""
+    nm = layout.shape[0]
+    for m in range(nm):
+        h, w, r0, cf, cb = layout[m, 0], layout[m, 1], layout[m, 2], layout[m, 3], layout[m, 4]
+        x0, y0, t = geom[m, 0], geom[m, 1], geom[m, 2]
+        for i in range(h):
+            r = r0 + i
+            for j in range(w):
+                cov_f = depth0[r, cf + j, 0] < 1.0
+                cov_b = depth0[r, cb + j, 0] < 1.0
+                if cov_f == cov_b:
+                    continue
+                miss = cb if cov_f else cf  # column base of the missing side in map m
+                x = x0 + (j + 0.5) * t
+                y = y0 + (i + 0.5) * t
+                found = False
+                for m2 in range(nm):
+                    if m2 == m:
+                        continue
+                    h2, w2, r2, cf2, cb2 = (layout[m2, 0], layout[m2, 1], layout[m2, 2], layout[m2, 3],
+                                            layout[m2, 4])
+                    u = (x - geom[m2, 0]) / geom[m2, 2]
+                    v = (y - geom[m2, 1]) / geom[m2, 2]
+                    if not (u >= 0.0 and v >= 0.0 and u < w2 and v < h2):
+                        continue
+                    rr = r2 + int(v)
+                    cc = (cb2 if cov_f else cf2) + int(u)
+                    if depth0[rr, cc, 0] < 1.0:
+                        for k in range(4):
+                            surf[r, miss + j, k] = surf[rr, cc, k]
+                        if has_vel:
+                            for k in range(4):
+                                vel[r, miss + j, k] = vel[rr, cc, k]
+                        depth[r, miss + j, 0] = 0.5
+                        found = True
+                        break
+                if not found:
+                    depth[r, cf + j, 0] = 1.0
+                    depth[r, cb + j, 0] = 1.0
 
 
 @njit(cache=True, parallel=True)

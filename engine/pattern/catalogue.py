@@ -11,6 +11,11 @@ XS 86/74/88, S 92/80/94, M 98/86/100, L 104/92/106, XL 110/98/112, XXL 116/106/1
 Ease (garment girth minus body girth) after W. Aldrich, "Metric Pattern Cutting for Women's
 Wear", 6th ed. (2015), block tables: fitted skirt waist +2, hips +4; semi-fitted dress bust
 +8, waist +6, hips +6; shirt/blouse bust +10, hips +8; trousers waist +2, hips +6.
+Armhole (scye) depth below the shoulder: 0.12 x height for women (Aldrich's women's block,
+21 cm at 164 cm), 0.14 x height for men (his men's blocks, ~24-25 cm at 176 cm: a deeper
+armhole for the thicker arm root; 0.12 measured 22-33 % strain at the male armpit).
+Neckline: half-width 0.045 x height or the body's neck base + 1 cm, whichever is wider (a
+muscular neck); front depth 0.8 x 9 cm below the side neck point, back 1.6 cm.
 
 Each garment is a GarmentCode specification (cm) plus a placement function from the body.
 """
@@ -27,6 +32,7 @@ from engine.pattern import geometry as geo
 from engine.pattern.spec import PanelHint, PatternSpec
 
 SIZES = ("XS", "S", "M", "L", "XL", "XXL")
+SCYE_WOMEN, SCYE_MEN = 0.12, 0.14  # armhole depth below the shoulder point, x height
 WOMEN = {"XS": (82, 64, 90), "S": (86, 68, 94), "M": (92, 74, 100), "L": (98, 80, 106),
          "XL": (104, 86, 112), "XXL": (110, 93, 118)}
 MEN = {"XS": (86, 74, 88), "S": (92, 80, 94), "M": (98, 86, 100), "L": (104, 92, 106),
@@ -163,9 +169,25 @@ def _fit(body: Body, size: str) -> Fit:
     sw = m.shoulder_width if np.isfinite(m.shoulder_width) else 0.21 * m.height
     fit = Fit(bust, waist, hips, 100 * m.height, 100 * m.shoulder_height, 100 * m.waist_height,
                100 * m.hip_height, 100 * m.crotch_height, 100 * m.knee_height, 100 * sw,
-               100 * (m.shoulder_height - 0.12 * m.height), _arm_joints(body), chart is MEN)
-    fit.neck_h = 100 * _side_neck_height(body, 0.045 * m.height, m.shoulder_height)
+               100 * (m.shoulder_height - (SCYE_MEN if chart is MEN else SCYE_WOMEN) * m.height),
+               _arm_joints(body), chart is MEN)
+    # the neckline: at least 0.045 x height each side of the centre, wider where the body's neck
+    # base is (a muscular neck and trapezius), with 1 cm to spare
+    nw = 0.045 * m.height
+    nh = _side_neck_height(body, nw, m.shoulder_height)
+    base = _neck_half_width(body, nh + 0.01)
+    if base + 0.01 > nw:
+        nw = base + 0.01
+        nh = _side_neck_height(body, nw, m.shoulder_height)
+    fit.neck_w, fit.neck_h = 100 * nw, 100 * nh
     return fit
+
+
+def _neck_half_width(body: Body, y: float) -> float:
+    """Half the x-extent (m) of the neck at height y (vertices within 12 cm of the centre line)."""
+    v = body.vertices
+    s = v[(np.abs(v[:, 1] - y) < 0.005) & (np.abs(v[:, 0]) < 0.12), 0]
+    return 0.0 if len(s) == 0 else float(0.5 * (s.max() - s.min()))
 
 
 def _side_neck_height(body: Body, nw: float, shoulder_h: float) -> float:
@@ -234,7 +256,7 @@ def _bodice(f: Fit, length: float, bust_ease: float, waist_ease: float | None, h
     side seams split at the underarm, waist and hip levels that lie above the hem.
     shoulder: where the shoulder seam ends, cm beyond the shoulder point (-1: a strap inside it,
     off the deltoid; a sleeved bodice reaches the arm)."""
-    nw = 0.045 * f.height  # half the neckline width
+    nw = getattr(f, "neck_w", 0.045 * f.height)  # half the neckline width
     sw = f.shoulder_w / 2 + shoulder
     slope = max(4.0, getattr(f, "neck_h", f.shoulder_h + 4.0) + 1.0 - f.shoulder_h)  # neck point 1 cm above the body
     ad = f.shoulder_h + slope - f.armpit_h  # armhole depth below the neck point
@@ -254,7 +276,8 @@ def _bodice(f: Fit, length: float, bust_ease: float, waist_ease: float | None, h
     def one(neck_depth, scoop):
         # scoop: how far inside the underarm point the armhole curve bows (cm); the back is
         # cut fuller than the front, over the shoulder blades
-        o = Outline((nw, 0)).curve((0.2 * nw, -1.1 * neck_depth), (-nw, 0), "neck")
+        # quadratic neckline: its lowest point is half the control point's depth (0.8 x neck_depth)
+        o = Outline((nw, 0)).curve((0.2 * nw, -1.6 * neck_depth), (-nw, 0), "neck")
         o.line((-sw, -slope), "shoulder_l")
         o.curve((-wb + scoop, -0.75 * ad), left[0], "arm_l")
         for i in range(1, n + 1):
