@@ -297,6 +297,29 @@ def test_segment_maps_fix_the_gap_between_arm_and_torso():
 
 
 @inner
+def test_segment_maps_complete_pixels_seen_from_one_side_only():
+    """A body split by an oblique cut (like the shoulder: the deltoid's front is arm, the upper
+    back torso): over the overlap each segment's open mesh is seen by one camera only; the
+    pixel borrows the other side from the other segment, so inside stays inside."""
+    from engine.body.types import SEGMENT_ID
+    from engine.collide.maps import render_body_maps
+    from engine.collide.query import query_points
+
+    v, f = _sphere(sub=5, r=0.15, centre=(0, 1.0, 0))
+    seg = np.where(v[:, 2] + v[:, 0] > 0, SEGMENT_ID["left_arm"], SEGMENT_ID["torso"]).astype(np.uint8)
+    maps = render_body_maps(_body(v, f, seg), texel=TEXEL, segments=["torso", "left_arm"])
+    zs = np.linspace(-0.13, 0.13, 9)
+    inside = np.array([[0.0, 1.0, z] for z in zs])
+    q = query_points(maps, inside)
+    assert np.all(q.status == 2), q.status
+    behind, ahead = np.array([[0.0, 1.0, -0.18]]), np.array([[0.0, 1.0, 0.18]])
+    assert query_points(maps, behind).status[0] == 0 and query_points(maps, ahead).status[0] == 0
+    near = query_points(maps, np.array([[0.0, 1.0, -0.148]]))  # 2 mm inside the back
+    assert near.status[0] == 2 and near.surface[0, 2] == pytest.approx(-0.15, abs=0.002)
+    assert near.normal[0, 2] < -0.9
+
+
+@inner
 def test_height_window_covers_only_that_range():
     from engine.collide.maps import render_body_maps
     from engine.collide.query import query_points
