@@ -301,7 +301,8 @@ def test_fabrics_are_physical():
 
 
 def test_stale_contacts_carry_the_last_answer_forward():
-    # three points answered at the query: in the band (depth 2 mm, normal +z), clear, inside
+    # three points answered at the query: in the band (depth 2 mm, normal +z), clear 10 mm
+    # from the band, inside (depth 4 mm, normal +x)
     q_pts = np.zeros((3, 3))
     q_st = np.array([1, 0, 2], np.int8)
     q_n = np.array([[0, 0, 1.0], [0, 0, 1.0], [1.0, 0, 0]])
@@ -309,10 +310,15 @@ def test_stale_contacts_carry_the_last_answer_forward():
     st, d = np.zeros(3, np.int8), np.zeros(3)
     # point 0 moved 3 mm out along its normal (leaves the band), point 2 moved 1 mm deeper
     pts = q_pts + np.array([[0, 0, 0.003], [0.0005, 0, 0], [-0.001, 0, 0]])
-    moved = K.stale_contacts(pts, q_pts, q_st, q_n, q_d, st, d)
-    assert moved == pytest.approx(0.003)
+    assert not K.stale_contacts(pts, q_pts, q_st, q_n, q_d, st, d, 0.004, 0.0005)
     assert st.tolist() == [0, 0, 2]
     assert d[0] == pytest.approx(-0.001) and d[2] == pytest.approx(0.005)
+    # stale: a point moved more than `reach`, or the clear one moved past its distance + slack
+    assert K.stale_contacts(pts, q_pts, q_st, q_n, q_d, st, d, 0.002, 0.0005)
+    pts[1] = [0.0, 0.0, -0.011]
+    assert K.stale_contacts(pts, q_pts, q_st, q_n, q_d, st, d, 0.1, 0.0005)
+    pts[1] = [0.0, 0.0, -0.0104]
+    assert not K.stale_contacts(pts, q_pts, q_st, q_n, q_d, st, d, 0.1, 0.0005)
 
 
 class _CountingCollider:
@@ -350,3 +356,15 @@ def test_solver_requeries_when_the_body_moves_or_points_travel(garment):
         s.step(st)
     travelled = 16 * m.dt_bound * 1.0  # metres each point moved in these steps
     assert int(travelled / 0.001) <= s.collider.calls - calls <= int(travelled / 0.001) + 1 < 8
+    # a clear point heading for the floor is asked again before it gets 0.5 mm into the band,
+    # even when `requery_move` alone would wait (1 cm here)
+    m2 = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
+                     get_fabric("cotton"), H, ClothParams(requery_every=8, requery_move=0.01))
+    s2 = ClothSolver(m2, _CountingCollider(), gravity=np.zeros(3))
+    x2 = garment.positions.copy()
+    x2[:, 1] += 0.0055 - x2[:, 1].min()  # 0.5 mm above the band
+    st = ClothState(x2, np.zeros_like(x2))
+    st.v[:] = [0.0, -2.0, 0.0]  # 0.34 mm a step: past 0.5 + 0.5 mm by the 3rd step
+    for _ in range(4):
+        s2.step(st)
+    assert s2.collider.calls >= 2

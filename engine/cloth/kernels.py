@@ -69,27 +69,32 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, springs, rest, k, gravity, d
 
 
 @njit(fastmath=True, cache=True)
-def stale_contacts(points, q_points, q_status, q_normal, q_depth, status, depth):
+def stale_contacts(points, q_points, q_status, q_normal, q_depth, status, depth, reach, slack):
     """Between two map queries: carry each checked point's last answer forward, its depth
     corrected by how far it moved along the normal since the query (a point that left the band
-    becomes clear). Returns the largest distance a point moved since the query, so the caller
-    queries again before anything could have crossed the band unseen."""
-    far = 0.0
+    becomes clear). Returns True when the answers may be stale: a point moved more than `reach`,
+    or a point that was clear moved farther than its distance from the band (q_depth < 0 is
+    minus that distance) plus `slack` -- so nothing gets deeper than `slack` into the band
+    unseen (the response only pushes in the band's inner half)."""
+    r2 = reach * reach
     for p in range(points.shape[0]):
         dx = points[p, 0] - q_points[p, 0]
         dy = points[p, 1] - q_points[p, 1]
         dz = points[p, 2] - q_points[p, 2]
         d2 = dx * dx + dy * dy + dz * dz
-        if d2 > far:
-            far = d2
+        if d2 > r2:
+            return True
         st = q_status[p]
         if st == 0:
+            lim = slack - q_depth[p]
+            if d2 > lim * lim:
+                return True
             status[p] = 0
             continue
         d = q_depth[p] - (dx * q_normal[p, 0] + dy * q_normal[p, 1] + dz * q_normal[p, 2])
         depth[p] = d
         status[p] = st if d > 0.0 else 0
-    return np.sqrt(far)
+    return False
 
 
 @njit(fastmath=True, cache=True)

@@ -128,16 +128,15 @@ class ClothSolver:
         """The collider's answer for self.points. Asking the maps is the costliest part of a step,
         and at the eq. 4 time step a point moves a fraction of a millimetre per step, so the last
         answer is carried forward (depth corrected along the normal, K.stale_contacts) until a
-        point moved `requery_move`, `requery_every` steps passed, or the body moved (the
-        collider's version changed). A point that was clear stays clear until then: it is at
-        most requery_move into the 5 mm band, where the response does not push yet."""
+        point moved `requery_move`, a clear point moved as far as it was from the band,
+        `requery_every` steps passed, or the body moved (the collider's version changed)."""
         p = self.model.params
         c = self.collider
         ver = getattr(c, "version", None)
         if self._q is not None and self._q_age < p.requery_every and ver == self._q_version:
             q_pts, q_st, q_n, q_bv, q_d, st, d = self._q
-            moved = K.stale_contacts(self.points, q_pts, q_st, q_n, q_d, st, d)
-            if moved < p.requery_move:
+            if not K.stale_contacts(self.points, q_pts, q_st, q_n, q_d, st, d, p.requery_move,
+                                     0.1 * p.tolerance):
                 self._q_age += 1
                 return st, q_n, q_bv, d
         status, normal, bvel, depth = c.query(self.points)

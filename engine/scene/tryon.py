@@ -27,47 +27,48 @@ class TryOnPlan:
     window: tuple[float, float] | None
     segments: list[str] | None
     left_out: list[str] = field(default_factory=list)
+    sew_segments: list[str] | None = None  # maps seen while sewing, when not the same
 
 
 def plan_maps(body: Body, garment: Garment, texel: float, collision: str,
-              limbs: bool = True) -> TryOnPlan:
+              sleeves: bool = True) -> TryOnPlan:
     """Decide which maps to render for this body and garment (DESIGN: a scene leaves out what
-    it does not need). limbs: the garment has panels placed around an arm or a leg (sleeves,
-    trouser legs); only then are per-segment maps worth it (cloth can pass between a limb and
-    the torso) -- otherwise one whole-body map is used, which also answers better where the
-    segments overlap (measured: 4-5 mm penetration behind the shoulders of a sleeveless shirt
-    with segment maps, none with the whole-body map)."""
+    it does not need). sleeves: the garment has panels placed around an arm; a top without
+    them is sewn without the arm maps (its shoulder seams close over the arm's root, as an arm
+    goes through an armhole) and draped with them."""
     left: list[str] = ["velocity maps, because the body does not move"]
     top = float(garment.positions[:, 1].max())
     window = (0.0, min(body.vertices[:, 1].max(), top + 0.15))
     if window[1] < body.vertices[:, 1].max() - 1e-6:
         left.append(f"map rows above {window[1]:.2f} m, because the garment starts at {top:.2f} m "
                     "(cloth falls, it does not climb)")
-    segments = None
     if collision == "object":
         left = ["collision maps, because object-space collision (BVH) was chosen"]
         return TryOnPlan(texel, None, None, left)
-    if body.segments is not None and not limbs:
-        left.append("per-segment maps, because no panel wraps an arm or a leg (one whole-body map)")
-    elif body.segments is not None:
-        present = set(int(s) for s in np.unique(body.segments))
-        segs = [s for s in ("torso", "left_arm", "right_arm", "left_leg", "right_leg")
-                if SEGMENTS.index(s) in present]
-        # a garment whose top stays below the armpits never meets the arms
-        arm = np.isin(body.segments, [SEGMENTS.index("left_arm"), SEGMENTS.index("right_arm")])
-        torso = body.segments == SEGMENTS.index("torso")
-        armpit = float(body.vertices[arm, 1].min()) if arm.any() else np.inf
-        if top < armpit - 0.05 and torso.any():
-            segs = [s for s in segs if "arm" not in s]
-            left.append(f"arm maps, because the garment stays below the arms (top {top:.2f} m, "
-                        f"armpits {armpit:.2f} m)")
-        head = body.segments == SEGMENTS.index("head")
-        if head.any() and top + 0.05 > float(body.vertices[head, 1].min()):
-            segs = ["head"] + segs  # the head segment holds the neck, where necklines sit
-        else:
-            left.append("head maps, because the garment stays below the neck")
-        segments = segs
-    return TryOnPlan(texel, window, segments, left)
+    if body.segments is None:
+        return TryOnPlan(texel, window, None, left)
+    present = set(int(s) for s in np.unique(body.segments))
+    segs = [s for s in ("torso", "left_arm", "right_arm", "left_leg", "right_leg")
+            if SEGMENTS.index(s) in present]
+    # a garment whose top stays below the armpits never meets the arms
+    arm = np.isin(body.segments, [SEGMENTS.index("left_arm"), SEGMENTS.index("right_arm")])
+    torso = body.segments == SEGMENTS.index("torso")
+    armpit = float(body.vertices[arm, 1].min()) if arm.any() else np.inf
+    if top < armpit - 0.05 and torso.any():
+        segs = [s for s in segs if "arm" not in s]
+        left.append(f"arm maps, because the garment stays below the arms (top {top:.2f} m, "
+                    f"armpits {armpit:.2f} m)")
+    head = body.segments == SEGMENTS.index("head")
+    if head.any() and top + 0.05 > float(body.vertices[head, 1].min()):
+        segs = ["head"] + segs  # the head segment holds the neck, where necklines sit
+    else:
+        left.append("head maps, because the garment stays below the neck")
+    sew = None
+    if not sleeves and any("arm" in s for s in segs):
+        sew = [s for s in segs if "arm" not in s]
+        left.append("arm maps while sewing, because a top without sleeves closes its shoulder seams over "
+                    "the arm's root (they are back for the drape)")
+    return TryOnPlan(texel, window, segs, left, sew)
 
 
 def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float = 0.015,
@@ -93,10 +94,11 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
     progress("meshing", 0.0, "meshing the panels")
     garment = build_garment(spec, h=h, place=place or spec_placement(spec, body.to_world), source=source)
     hints = spec.tryon.placement if spec.tryon is not None else {}
-    limbs = any(h.region.endswith(("_arm", "_leg")) for h in hints.values())
-    plan = plan_maps(body, garment, texel, collision, limbs=limbs)
+    sleeves = any(h.region.endswith("_arm") for h in hints.values())
+    plan = plan_maps(body, garment, texel, collision, sleeves=sleeves)
     t0 = time.perf_counter()
     progress("maps", 0.0, "rendering collision maps" if collision == "image" else "building the BVH")
+    sew_collider = None
     if collision == "image":
         from engine.collide.collider import MapCollider
         from engine.collide.maps import render_body_maps
@@ -104,13 +106,16 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
         maps = render_body_maps(body, texel=texel, window=plan.window, segments=plan.segments,
                                 tol=o.params.tolerance)
         collider = MapCollider(maps)
+        if plan.sew_segments:
+            sew_collider = MapCollider(render_body_maps(body, texel=texel, window=plan.window,
+                                                        segments=plan.sew_segments, tol=o.params.tolerance))
         map_info = {"maps": maps.names, "texel_mm": texel * 1000,
                     "size": [[int(a), int(b)] for a, b in maps.layout[:, :2]]}
     else:
         collider = ObjectSpaceCollider(body.vertices, body.faces, tolerance=o.params.tolerance)
         map_info = {"maps": [], "bvh_triangles": int(len(body.faces))}
     t_maps = time.perf_counter() - t0
-    res = sew_and_drape(garment, collider, o, progress)
+    res = sew_and_drape(garment, collider, o, progress, sew_collider=sew_collider)
     bvh = MeshBVH(body.vertices, body.faces)
     pen = penetration_stats(body.vertices, body.faces, res.positions, bvh=bvh)
     iters = res.iterations["sewing"] + res.iterations["draping"]
