@@ -12,13 +12,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from engine.jit import serial_kernel
+
 VM_ZERO, VM_AVERAGE, VM_DIRECTIONAL, VM_PROVOT = 0, 1, 2, 3
 MAX_PUSH = 1.0  # m/s: fastest a collision response moves a point out of the body
 PUSH_TIME = 0.02  # s: a point too deep in the band is moved out over about this long
 VM_MODES = {"zero": VM_ZERO, "average": VM_AVERAGE, "directional": VM_DIRECTIONAL, "provot": VM_PROVOT}
 
 
-@njit(fastmath=True, cache=True)
+@serial_kernel
 def eval_forces_and_integrate(x, v, inv_mass, mass, springs, rest, k, gravity, damping,
                               contact, contact_n, mu, dt, f_out):
     """Springs (eq. 2) -- one pass over the springs, each adding its force to both ends (serial,
@@ -68,7 +70,7 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, springs, rest, k, gravity, d
         v[i, 2] += w * fz
 
 
-@njit(fastmath=True, cache=True)
+@serial_kernel
 def stale_contacts(points, q_points, q_status, q_normal, q_depth, status, depth, reach, slack):
     """Between two map queries: carry each checked point's last answer forward, its depth
     corrected by how far it moved along the normal since the query (a point that left the band
@@ -97,7 +99,7 @@ def stale_contacts(points, q_points, q_status, q_normal, q_depth, status, depth,
     return False
 
 
-@njit(fastmath=True, cache=True)
+@njit(fastmath=True, cache=True, inline="always")
 def _modify_one(x, v, a, b, rest, threshold, mode, gravity, dt, body_v, recover):
     """One spring of the velocity modification; returns True if it changed velocities.
     Beyond the seeds, a spring already past the limit by e is also given a closing speed
@@ -143,7 +145,7 @@ def _modify_one(x, v, a, b, rest, threshold, mode, gravity, dt, body_v, recover)
     return True
 
 
-@njit(fastmath=True, cache=True)
+@serial_kernel
 def modify_velocities(x, v, springs, rest, active, threshold, mode, gravity, dt, body_v, passes, work,
                       recover, n_known=-1):
     """Velocity modification against super-elasticity, after each step. For a spring longer
@@ -197,7 +199,7 @@ def modify_velocities(x, v, springs, rest, active, threshold, mode, gravity, dt,
     return n_act
 
 
-@njit(fastmath=True, cache=True)
+@njit(fastmath=True, cache=True, inline="always")
 def _project_one(x, a, b, lmax, inv_mass):
     dx = x[b, 0] - x[a, 0]
     dy = x[b, 1] - x[a, 1]
@@ -216,7 +218,7 @@ def _project_one(x, a, b, lmax, inv_mass):
     return True
 
 
-@njit(fastmath=True, cache=True)
+@serial_kernel
 def provot_positions(x, springs, rest, active, threshold, inv_mass, passes, work):
     """Provot (1995) position modification: move the ends of springs longer than
     (1 + threshold) x rest toward each other (mass-weighted) back to that length. One sweep
@@ -239,7 +241,7 @@ def provot_positions(x, springs, rest, active, threshold, inv_mass, passes, work
     return n_act
 
 
-@njit(fastmath=True, cache=True)
+@serial_kernel
 def point_average(a, quads, tris, out):
     """A per-vertex field (N, 3) at the checked points: the vertices, then quad midpoints, then
     triangle centroids (seed 003 §6's face-body checks), into out (N + Q + T, 3)."""
@@ -256,7 +258,7 @@ def point_average(a, quads, tris, out):
             out[n + nq + t, c] = (a[tris[t, 0], c] + a[tris[t, 1], c] + a[tris[t, 2], c]) / 3.0
 
 
-@njit(fastmath=True, cache=True)
+@serial_kernel
 def collision_points(x, v, dt, quads, tris, p_out, pv_out):
     """The checked points at their predicted positions x + dt v, and their velocities."""
     point_average(x, quads, tris, p_out)
@@ -266,7 +268,7 @@ def collision_points(x, v, dt, quads, tris, p_out, pv_out):
             p_out[p, c] += dt * pv_out[p, c]
 
 
-@njit(fastmath=True, cache=True)
+@njit(fastmath=True, cache=True, inline="always")
 def _respond(vx, vy, vz, nx, ny, nz, bx, by, bz, depth, tol, refl, mu, dt):
     """Eq. 12 / eq. 15 for one point: relative velocity to the body, reflected normal part
     (C_refl), Coulomb friction on the tangential part (C_fric = max(0, 1 - mu |dv_n| / |v_t|)),
@@ -295,17 +297,21 @@ def _respond(vx, vy, vz, nx, ny, nz, bx, by, bz, depth, tol, refl, mu, dt):
     return (cf * tx + new_vn * nx + bx, cf * ty + new_vn * ny + by, cf * tz + new_vn * nz + bz)
 
 
-@njit(fastmath=True, cache=True)
+@serial_kernel
 def collision_response(v, status, normal, body_v, depth, pv, n_vertices, quads, tris,
                        tol, refl, mu, dt, contact, contact_n, vbody_out):
     """Apply the responses of vertex and face checks: a face's resulting velocity goes to all its
     corners; a vertex with several responses gets their average (seed 003 §6). Marks contacts
     (used by next step's reaction force) and records the body velocity seen by each vertex."""
     n = n_vertices
-    acc = np.zeros((n, 3))
-    cnt = np.zeros(n, dtype=np.int32)
+    acc = np.empty((n, 3))  # (no np.zeros in a serial_kernel: see engine/jit.py)
+    cnt = np.empty(n, dtype=np.int32)
     hits = 0
     for i in range(n):
+        acc[i, 0] = 0.0
+        acc[i, 1] = 0.0
+        acc[i, 2] = 0.0
+        cnt[i] = 0
         contact[i] = False
         vbody_out[i, 0] = 0.0
         vbody_out[i, 1] = 0.0
@@ -349,7 +355,7 @@ def collision_response(v, status, normal, body_v, depth, pv, n_vertices, quads, 
     return hits
 
 
-@njit(fastmath=True, cache=True)
+@serial_kernel
 def integrate_positions(x, v, dt):
     """The position half of eq. 3: p += dt v."""
     for i in range(x.shape[0]):
@@ -358,7 +364,7 @@ def integrate_positions(x, v, dt):
         x[i, 2] += dt * v[i, 2]
 
 
-@njit(fastmath=True, cache=True)
+@serial_kernel
 def kinetic_energy(v, mass):
     e = 0.0
     for i in range(v.shape[0]):
@@ -366,13 +372,14 @@ def kinetic_energy(v, mass):
     return e
 
 
-@njit(fastmath=True, cache=True)
+@serial_kernel
 def max_strain(x, springs, rest, active):
-    out = np.zeros(springs.shape[0])
+    """Largest strain (length / rest - 1) over the active springs; 0 when there are none."""
+    best = -np.inf
     for s in range(springs.shape[0]):
         if active[s]:
             a = springs[s, 0]
             b = springs[s, 1]
             d = np.sqrt((x[b, 0] - x[a, 0]) ** 2 + (x[b, 1] - x[a, 1]) ** 2 + (x[b, 2] - x[a, 2]) ** 2)
-            out[s] = d / rest[s] - 1.0
-    return out.max() if out.shape[0] else 0.0
+            best = max(best, d / rest[s] - 1.0)
+    return best if best > -np.inf else 0.0

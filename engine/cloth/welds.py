@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from engine.jit import serial_kernel
 
 
-@njit(cache=True)
+@serial_kernel(fastmath=False)
 def seam_gaps(x, pairs, out):
     for k in range(pairs.shape[0]):
         a, b = pairs[k, 0], pairs[k, 1]
@@ -14,7 +14,7 @@ def seam_gaps(x, pairs, out):
     return out
 
 
-@njit(cache=True)
+@serial_kernel(fastmath=False)
 def hold_welds(x, v, mass, pairs, welded):
     """Welded pairs move as one point: mass-weighted mean position and velocity."""
     for k in range(pairs.shape[0]):
@@ -51,7 +51,7 @@ def merge_map(n: int, pairs: np.ndarray) -> np.ndarray:
     return new.astype(np.int64)
 
 
-@njit(cache=True)
+@serial_kernel(fastmath=False)
 def pull_seams(x, v, mass, pairs, welded, tau, vmax, contact, contact_n):
     """Sewing as a velocity modification (in the spirit of seed 003 §4.3): each open seam pair
     gets the relative velocity that closes its gap in time tau (at most vmax), shared so the

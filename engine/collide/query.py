@@ -40,6 +40,7 @@ import numpy as np
 from numba import njit, prange
 
 from engine.collide.maps import CollisionMaps
+from engine.jit import serial_kernel
 
 CLEAR, BAND, INSIDE = 0, 1, 2
 
@@ -200,7 +201,7 @@ def query_batch(points, tol, surf, vel, has_vel, kind, side_src, geom, layout,
                          velocity, map_index)
 
 
-@njit(cache=True)
+@serial_kernel(fastmath=False)
 def query_batch_serial(points, tol, surf, vel, has_vel, kind, side_src, geom, layout,
                        status, surface, penetration, normal, velocity, map_index):
     """query_batch on one thread: the cloth solver's per-step query (a parallel region per step

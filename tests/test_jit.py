@@ -1,0 +1,126 @@
+"""engine.jit.serial_kernel: kernels compiled with numba's parallel pipeline must stay serial --
+no array expression or np.zeros that numba would turn into a loop on its thread pool (those
+stall when another process holds a core). Checked on the kernels as the solver really calls
+them: a cloth falls onto a box for a few steps, then each serial kernel is compiled afresh
+(uncached, so numba's parfor diagnostics exist) for the argument types it was called with."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from numba import njit
+
+from engine.cloth import kernels as K
+from engine.cloth import welds as W
+from engine.cloth.fabrics import get_fabric
+from engine.cloth.model import ClothState, build_model
+from engine.cloth.solver import ClothSolver
+from engine.collide import query as Q
+from engine.collide.bvh import ObjectSpaceCollider
+from engine.garment.garment import build_garment
+from engine.pattern.spec import PatternSpec
+
+
+def _serial_kernels():
+    out = []
+    for mod in (K, W, Q):
+        for name in dir(mod):
+            f = getattr(mod, name)
+            if hasattr(f, "py_func") and f.targetoptions.get("parallel") and "prange" not in _src(f):
+                out.append((f"{mod.__name__}.{name}", f))
+    return out
+
+
+def _src(f):
+    import inspect
+
+    return inspect.getsource(f.py_func)
+
+
+def test_serial_kernels_compile_without_parallel_loops():
+    spec = PatternSpec.model_validate({"pattern": {"panels": {"sq": {
+        "vertices": [[0, 0], [20, 0], [20, 20], [0, 20]], "edges": [{"endpoints": [i, (i + 1) % 4]} for i in range(4)],
+        "translation": [-10, 3, -10], "rotation": [90, 0, 0]}}, "stitches": []}})
+    g = build_garment(spec, h=0.02)
+    m = build_model(g.uv, g.panel, g.lattice, g.quads, g.tris, g.seams, get_fabric("cotton"), 0.02)
+    box = trimesh.creation.box((0.3, 0.3, 0.3))
+    solver = ClothSolver(m, ObjectSpaceCollider(np.asarray(box.vertices), np.asarray(box.faces), tolerance=0.005))
+    state = ClothState(g.positions.copy(), np.zeros_like(g.positions))
+    pairs = np.array([[0, 1]], np.int64)
+    solver.sewing = (pairs, np.zeros(1, np.bool_), 0.02, 3.0)
+    for _ in range(5):
+        solver.step(state)
+    W.hold_welds(state.x, state.v, m.mass, pairs, np.ones(1, np.bool_))
+    W.seam_gaps(state.x, pairs, np.zeros(1))
+    K.kinetic_energy(state.v, m.mass), K.max_strain(state.x, m.springs, m.rest, solver.active)
+    K.provot_positions(state.x, m.springs, m.rest, solver.active, 0.05, m.inv_mass, 2, solver.vm_work)
+    # the map query, on empty input with the map arrays' types
+    Q.query_batch_serial(np.zeros((0, 3)), 0.005, np.zeros((2, 4, 4), np.float32), np.zeros((1, 1, 4), np.float32),
+                         False, np.zeros((2, 4), np.int8), np.zeros((2, 4), np.int32), np.zeros((1, 3)),
+                         np.zeros((1, 5), np.int32), np.zeros(0, np.int8), np.zeros((0, 3)), np.zeros(0),
+                         np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int32))
+    kernels = _serial_kernels()
+    assert len(kernels) >= 10, [n for n, _ in kernels]
+    checked = []
+    for name, f in kernels:
+        if not f.signatures:
+            continue
+        fresh = njit(parallel=True, fastmath=f.targetoptions.get("fastmath", False))(f.py_func)
+        for sig in f.signatures:
+            fresh.compile(sig)
+            diag = fresh.overloads[sig].metadata["parfor_diagnostics"]
+            assert not diag.initial_parfors, f"{name} has a parallel loop (array expression / np.zeros?)"
+        checked.append(name)
+    for must in ("modify_velocities", "eval_forces_and_integrate", "collision_response", "query_batch_serial",
+                 "pull_seams"):
+        assert any(n.endswith("." + must) for n in checked), (must, checked)
+
+
+def test_a_parallel_array_expression_is_caught():
+    """The check above can fail: np.zeros in a parallel-compiled kernel shows up as a parfor."""
+
+    def bad(a):
+        b = np.zeros(a.shape[0])
+        for i in range(a.shape[0]):
+            b[i] = a[i]
+        return b
+
+    fresh = njit(parallel=True)(bad)
+    fresh(np.ones(3))
+    assert fresh.overloads[fresh.signatures[0]].metadata["parfor_diagnostics"].initial_parfors
+
+
+@pytest.mark.parametrize("fn", ["modify_velocities", "collision_response"])
+def test_serial_kernel_matches_plain_njit(fn):
+    """Same results as plain @njit (the parallel pipeline only changes how fast it runs)."""
+    rng = np.random.default_rng(1)
+    n, s = 200, 800
+    springs = rng.integers(0, n, (s, 2)).astype(np.int32)
+    x = rng.normal(size=(n, 3))
+    v = rng.normal(size=(n, 3))
+    if fn == "modify_velocities":
+        rest = np.linalg.norm(x[springs[:, 1]] - x[springs[:, 0]], axis=1) * 0.9
+        args = (springs, rest, np.ones(s, np.bool_), 0.05, K.VM_AVERAGE, np.array([0, -9.81, 0.0]), 1e-3,
+                np.zeros((n, 3)), 6, np.zeros(s, np.int32), 0.002)
+        outs = []
+        for f in (getattr(K, fn), njit(fastmath=True)(getattr(K, fn).py_func)):
+            vv = v.copy()
+            outs.append((f(x, vv, *args), vv))
+        assert outs[0][0] == outs[1][0] and np.allclose(outs[0][1], outs[1][1], atol=1e-12)
+    else:
+        quads = rng.integers(0, n, (50, 4)).astype(np.int32)
+        tris = np.zeros((0, 3), np.int32)
+        m = n + 50
+        status = rng.integers(0, 3, m).astype(np.int8)
+        nrm = rng.normal(size=(m, 3))
+        nrm /= np.linalg.norm(nrm, axis=1)[:, None]
+        pv = rng.normal(size=(m, 3))
+        outs = []
+        for f in (K.collision_response, njit(fastmath=True)(K.collision_response.py_func)):
+            vv, c, cn, vb = v.copy(), np.zeros(n, np.bool_), np.zeros((n, 3)), np.zeros((n, 3))
+            hits = f(vv, status, nrm, np.zeros((m, 3)), np.full(m, 0.003), pv, n,
+                     quads, tris, 0.005, 0.0, 0.4, 1e-3, c, cn, vb)
+            outs.append((hits, vv, c))
+        assert outs[0][0] == outs[1][0] and np.allclose(outs[0][1], outs[1][1]) and np.array_equal(outs[0][2], outs[1][2])
+        assert outs[0][0] > 0
