@@ -248,14 +248,20 @@ def point_average(a, quads, tris, out):
     n = a.shape[0]
     nq = quads.shape[0]
     for i in range(n):
-        for c in range(3):
-            out[i, c] = a[i, c]
+        out[i, 0] = a[i, 0]
+        out[i, 1] = a[i, 1]
+        out[i, 2] = a[i, 2]
     for q in range(nq):
-        for c in range(3):
-            out[n + q, c] = 0.25 * (a[quads[q, 0], c] + a[quads[q, 1], c] + a[quads[q, 2], c] + a[quads[q, 3], c])
+        i0, i1, i2, i3 = quads[q, 0], quads[q, 1], quads[q, 2], quads[q, 3]
+        out[n + q, 0] = 0.25 * (a[i0, 0] + a[i1, 0] + a[i2, 0] + a[i3, 0])
+        out[n + q, 1] = 0.25 * (a[i0, 1] + a[i1, 1] + a[i2, 1] + a[i3, 1])
+        out[n + q, 2] = 0.25 * (a[i0, 2] + a[i1, 2] + a[i2, 2] + a[i3, 2])
+    third = 1.0 / 3.0
     for t in range(tris.shape[0]):
-        for c in range(3):
-            out[n + nq + t, c] = (a[tris[t, 0], c] + a[tris[t, 1], c] + a[tris[t, 2], c]) / 3.0
+        i0, i1, i2 = tris[t, 0], tris[t, 1], tris[t, 2]
+        out[n + nq + t, 0] = third * (a[i0, 0] + a[i1, 0] + a[i2, 0])
+        out[n + nq + t, 1] = third * (a[i0, 1] + a[i1, 1] + a[i2, 1])
+        out[n + nq + t, 2] = third * (a[i0, 2] + a[i1, 2] + a[i2, 2])
 
 
 @serial_kernel

@@ -99,7 +99,6 @@ class ClothSolver:
             # collision response so nothing moves into the body.
             for r in range(p.contact_rounds):
                 if r > 0:
-                    K.point_average(state.v, m.quads, m.tris, self.point_v)
                     K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active,
                                         m.fabric.strain_threshold, self.mode, self.gravity * gravity_scale, dt,
                                         self.body_v, p.vm_passes, self.vm_work, recover, n_act)
