@@ -169,6 +169,52 @@ def test_free_fall(garment, mode):
     assert solver.iterations == steps
 
 
+def _vibration_energy(garment, spring_damping, steps=400):
+    """A flat square given a high-frequency velocity pattern in its plane (neighbours moving
+    against each other: the springs' own vibration), no gravity, no viscous damping: kinetic
+    energy left after `steps` steps at the eq. 4 bound, as a fraction of the start."""
+    m = _model(garment, params=replace(ClothParams(), spring_damping=spring_damping, damping=0.0))
+    solver = ClothSolver(m, collider=None, gravity=np.zeros(3))
+    rng = np.random.default_rng(3)
+    v0 = rng.normal(0.0, 0.05, (m.n, 3))
+    normal = np.linalg.svd(garment.positions - garment.positions.mean(0))[2][2]
+    v0 -= np.outer(v0 @ normal, normal)
+    state = ClothState(garment.positions.copy(), v0 - (m.mass[:, None] * v0).sum(0) / m.mass.sum())
+    e0 = solver.kinetic_energy(state)
+    for _ in range(steps):
+        solver.step(state)
+    assert np.all(np.isfinite(state.v))
+    return solver.kinetic_energy(state) / e0, m
+
+
+def test_spring_damping_stills_vibration(garment):
+    """Explicit Euler has no damping of its own: without spring damping a vibration keeps most
+    of its energy; with the default it dies out (measured on a draped skirt: a median 0.11 m/s
+    of vibration after 4 s without it, 0.02 m/s with it)."""
+    undamped, _ = _vibration_energy(garment, 0.0)
+    damped, m = _vibration_energy(garment, ClothParams().spring_damping)
+    assert undamped > 0.3
+    assert damped < 0.1 * undamped
+    # the damping stays within its stability cap at the step
+    assert np.all(m.spring_c > 0) and np.all(np.isfinite(m.spring_c))
+
+
+def test_spring_damping_leaves_rigid_motion_alone(garment):
+    """A cloth moving as one piece has no relative velocity along its springs: no damping."""
+    m = _model(garment, params=replace(ClothParams(), damping=0.0))
+    solver = ClothSolver(m, collider=None, gravity=np.zeros(3))
+    state = ClothState(garment.positions.copy(), np.tile([0.3, -0.2, 0.1], (m.n, 1)))
+    for _ in range(100):
+        solver.step(state)
+    np.testing.assert_allclose(state.v, np.tile([0.3, -0.2, 0.1], (m.n, 1)), atol=1e-9)
+
+
+@pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan")])
+def test_model_refuses_bad_spring_damping(garment, bad):
+    with pytest.raises(InputError, match="spring damping"):
+        _model(garment, params=replace(ClothParams(), spring_damping=bad))
+
+
 def test_gravity_vector_is_y_down():
     np.testing.assert_allclose(GRAVITY, [0.0, -9.81, 0.0])
 

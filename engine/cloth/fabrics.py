@@ -24,6 +24,16 @@ The simulation uses the measured stretch and shear stiffness times `ClothParams.
 seed 003 §4 -- softer springs allow a larger stable time step (eq. 4). Measured here: much softer
 springs (0.0005-0.002) let the strain limit lose where the body pushes cloth outward (a waistband
 on the hips, 20-25 % strain), so the default stays at 0.03.
+Why (measured and worked out in the session of 2026-11-30): a band around the hips is a ring;
+its springs can only shorten by moving the ring inward, and a spring-by-spring modification moves
+their ends along the ring instead, taking off about (edge / radius)^2 / 2 of the excess per pass
+(0.5 % for a 1.5 cm edge on a 15 cm radius). With stiff springs the spring forces, all applied at
+once, carry the hoop tension; with soft springs and a large step (scale 5e-6: 7.8 ms) the band
+stretches 60-90 % over the hips even with the conditions judged at the end of the step. Solving
+the strain limit and the contacts together (conjugate gradients with an active set; sequential
+impulses with warm starts) held the ring in free fall but not where the body wedges it (the hoop
+impulse needed is ~ 1 / (edge / radius x slope) times the load, and the solve must be that much
+more exact); that is the open problem behind the iteration counts.
 """
 
 from __future__ import annotations

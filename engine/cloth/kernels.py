@@ -21,9 +21,10 @@ VM_MODES = {"zero": VM_ZERO, "average": VM_AVERAGE, "directional": VM_DIRECTIONA
 
 
 @serial_kernel
-def eval_forces_and_integrate(x, v, inv_mass, mass, springs, rest, k, gravity, damping,
+def eval_forces_and_integrate(x, v, inv_mass, mass, springs, rest, k, spring_c, gravity, damping,
                               contact, contact_n, mu, dt, f_out):
-    """Springs (eq. 2) -- one pass over the springs, each adding its force to both ends (serial,
+    """Springs (eq. 2) with damping along each spring (spring_c, N.s/m) -- one pass over the
+    springs, each adding its force to both ends (serial,
     so the scatter is race-free and every length is computed once) -- gravity, viscous damping,
     then the reaction force of seed 000 eq. 16 where the vertex touched the body in the previous
     step (cancel the force into the body, Coulomb friction on the tangential part), then the
@@ -41,7 +42,9 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, springs, rest, k, gravity, d
         dz = x[b, 2] - x[a, 2]
         length = np.sqrt(dx * dx + dy * dy + dz * dz)
         if length > 1e-12:
-            c = k[s] * (length - rest[s]) / length
+            # spring force plus damping of the spring's rate of stretch (along the spring)
+            rate = ((v[b, 0] - v[a, 0]) * dx + (v[b, 1] - v[a, 1]) * dy + (v[b, 2] - v[a, 2]) * dz) / length
+            c = (k[s] * (length - rest[s]) + spring_c[s] * rate) / length
             f_out[a, 0] += c * dx
             f_out[a, 1] += c * dy
             f_out[a, 2] += c * dz

@@ -75,7 +75,7 @@ class ClothSolver:
         recover = max(self.recover, dt)  # work an excess off over at least one step (no overshoot)
         t0 = time.perf_counter()
         # forces (eq. 2, gravity, damping, reaction eq. 16) and v += dt a (eq. 3)
-        K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, m.springs, m.rest, m.stiffness,
+        K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, m.springs, m.rest, m.stiffness, m.spring_c,
                                     self.gravity * gravity_scale,
                                     p.damping * damping_scale,
                                     self.contact, self.contact_n, m.fabric.friction * friction_scale, dt, self.f)
