@@ -2,8 +2,8 @@
 
 `serial_kernel` compiles with numba's parallel pipeline switched on, although the kernels have
 no prange and run on one thread: measured on numba 0.68 (scripts/bench_kernels.py), the same
-serial loop compiled this way runs 4-6x faster (the velocity modification over 16k springs:
-8.3 -> 1.6 ms; a map query: 290 -> 47 ns a point) with bit-identical results. A kernel so
+serial loop compiled this way runs 3-9x faster (the velocity modification: ~58 -> ~14 ns a
+spring and pass; a map query near the body: ~430 -> ~50 ns a point) with bit-identical results. A kernel so
 decorated must hold no array expression or np.zeros/np.ones (numba would turn those into
 parallel loops on its thread pool, which stall when another process holds a core): take
 buffers from the caller, or allocate with np.empty and fill in a loop.
@@ -21,8 +21,8 @@ from numba.core.errors import NumbaPerformanceWarning
 warnings.filterwarnings("ignore", category=NumbaPerformanceWarning, message=r"(?s).*parallel=True.*")
 
 
-def serial_kernel(fn=None, *, fastmath: bool = True, inline: str = "never"):
+def serial_kernel(fn=None, *, fastmath: bool = True):
     """@serial_kernel or @serial_kernel(fastmath=False): njit(cache=True, parallel=True, ...)."""
     def wrap(f):
-        return njit(cache=True, fastmath=fastmath, parallel=True, inline=inline)(f)
+        return njit(cache=True, fastmath=fastmath, parallel=True)(f)
     return wrap(fn) if fn is not None else wrap

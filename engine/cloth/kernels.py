@@ -24,11 +24,11 @@ VM_MODES = {"zero": VM_ZERO, "average": VM_AVERAGE, "directional": VM_DIRECTIONA
 def eval_forces_and_integrate(x, v, inv_mass, mass, springs, rest, k, spring_c, gravity, damping,
                               contact, contact_n, mu, dt, f_out):
     """Springs (eq. 2) with damping along each spring (spring_c, N.s/m) -- one pass over the
-    springs, each adding its force to both ends (serial,
-    so the scatter is race-free and every length is computed once) -- gravity, viscous damping,
-    then the reaction force of seed 000 eq. 16 where the vertex touched the body in the previous
-    step (cancel the force into the body, Coulomb friction on the tangential part), then the
-    velocity half of eq. 3: v += dt f / m. f_out keeps the force for diagnostics."""
+    springs, each adding its force to both ends (serial, so the scatter is race-free and every
+    length is computed once) -- gravity, viscous damping, then the reaction force of seed 000
+    eq. 16 where the vertex touched the body in the previous step (cancel the force into the
+    body, Coulomb friction on the tangential part), then the velocity half of eq. 3:
+    v += dt f / m. f_out keeps the force for diagnostics."""
     n = x.shape[0]
     for i in range(n):
         f_out[i, 0] = mass[i] * gravity[0] - damping * mass[i] * v[i, 0]
@@ -383,12 +383,15 @@ def kinetic_energy(v, mass):
 
 @serial_kernel
 def max_strain(x, springs, rest, active):
-    """Largest strain (length / rest - 1) over the active springs; 0 when there are none."""
+    """Largest strain (length / rest - 1) over the springs, inactive ones counting as 0; 0 when
+    there are none."""
     best = -np.inf
     for s in range(springs.shape[0]):
+        strain = 0.0
         if active[s]:
             a = springs[s, 0]
             b = springs[s, 1]
             d = np.sqrt((x[b, 0] - x[a, 0]) ** 2 + (x[b, 1] - x[a, 1]) ** 2 + (x[b, 2] - x[a, 2]) ** 2)
-            best = max(best, d / rest[s] - 1.0)
+            strain = d / rest[s] - 1.0
+        best = max(best, strain)
     return best if best > -np.inf else 0.0

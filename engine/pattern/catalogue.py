@@ -288,8 +288,8 @@ def _bodice(f: Fit, length: float, bust_ease: float, waist_ease: float | None, h
         # quadratic neckline: its lowest point is half the control point's depth (0.8 x neck_depth)
         o = Outline((nw, 0)).curve((0.2 * nw, -1.6 * neck_depth), (-nw, 0), "neck")
         o.line((-sw, -slope), "shoulder_l")
-        o.curve((-wb - bust_shift + scoop, -0.75 * ad), (left[0][0] - bust_shift, left[0][1]), "arm_l")
         side_pts = [(u - bust_shift, v) for u, v in left]
+        o.curve((-wb - bust_shift + scoop, -0.75 * ad), side_pts[0], "arm_l")
         for i in range(1, n + 1):
             o.line(side_pts[i], f"side_l{i}")
         o.line((-side_pts[n][0], side_pts[n][1]), "hem")
