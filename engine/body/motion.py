@@ -1,0 +1,317 @@
+"""Body motion: a procedural walk cycle for a rigged body, sampled into a `BodyTrack`.
+
+    track = walk_track(body, WalkParams(speed=1.2), fps=30)
+    v = track.vertices(i)            # (N, 3) world positions of frame i (any i >= 0)
+    u = track.velocities(i)          # (N, 3) world velocities (m/s)
+
+The walk (angles in degrees, from the shape of normal gait curves: Perry & Burnfield, "Gait
+Analysis", 2nd ed., 2010, ch. 4-6; Winter, "Biomechanics and Motor Control of Human Movement",
+4th ed., 2009, appendix A): per leg, with the gait phase p (0 = that leg's heel strike, the right
+leg half a cycle after the left)
+    hip flexion    10 + 20 cos(2 pi p)                      (+30 at heel strike, -10 at push-off)
+    knee flexion   3 + 15 b(p; 0.15, 0.07) + 57 b(p; 0.72, 0.11)   (loading response, swing)
+    ankle dorsiflexion 9 b(p; 0.45, 0.12) - 17 b(p; 0.63, 0.06) - 4 b(p; 0.06, 0.04)
+(b = a periodic Gaussian bump: centre, width), the pelvis turns +-4 degrees with the forward leg,
+the thorax turns against it, the arms swing +-14 degrees against the legs with the elbows bending
+0 .. 16 degrees less than the rest pose's ~45, and hang 6 degrees closer to the body than in the
+rest (A-) pose (more, and the hands press a skirt against the thighs).
+The hip amplitude is scaled so that one cycle covers the asked stride.
+
+Feet planted, by construction: every pose is lifted so its lowest foot point touches y = 0 (no
+floating, no floor penetration; this is the pelvis bob), and the root moves horizontally so that
+the lowest foot point -- the one the body stands on -- keeps its place from one instant to the
+next (no sliding; computed on a grid 16x finer than the frames). Walking in place is a treadmill:
+the root stays put and the stance foot slides back at the walking speed.
+
+The walk starts from the rest pose (the pose the garment was draped on): the joint angles grow
+from 0 to full over `ramp` seconds (smoothstep) while the gait's clock speeds up from 0, starting
+at the left leg's mid-stance (so the first thing the body does is lift its right foot). After the ramp the motion is periodic; the
+track stores the ramp frames and one cycle, relative to the root's horizontal offset, and
+repeats the cycle shifted by the stride -- so one cycle of collision maps serves the whole walk.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from engine.body.rig import _skin_kernel, joint_matrices
+from engine.body.types import SEGMENT_ID, Body, Rig
+from engine.errors import InputError
+
+FINE = 16  # planting grid: steps per frame
+START_PHASE = 0.3  # the walk starts at the left leg's mid-stance
+
+
+@dataclass
+class WalkParams:
+    speed: float = 1.2  # m/s, a comfortable adult walking speed
+    stride: float | None = None  # m per cycle (two steps); None: 0.82 x stature (step ~0.41 h)
+    in_place: bool = False  # treadmill: the root stays, the stance foot slides back
+    ramp: float = 0.5  # s from the rest pose to the full walk
+
+    def validate(self) -> None:
+        if not (0.1 <= self.speed <= 5.0):
+            raise InputError(f"walking speed {self.speed} m/s is out of range (0.1 .. 5 m/s; 1.2 is a normal walk)")
+        if self.stride is not None and not (0.3 <= self.stride <= 2.5):
+            raise InputError(f"stride {self.stride} m is out of range (0.3 .. 2.5 m per cycle of two steps)")
+        if not (0.0 <= self.ramp <= 5.0):
+            raise InputError(f"ramp {self.ramp} s is out of range (0 .. 5 s)")
+
+
+@dataclass
+class BodyTrack:
+    """A body moving over time, sampled at `fps`.
+
+    frames: (F, N, 3) float32 positions relative to the root's horizontal offset (distinct frames:
+    the ramp, then one cycle when periodic); vel: (F, N, 3) float32 world velocities (m/s);
+    offsets: (F, 3) float64 root offsets (horizontal; world = frame + offset);
+    cycle_start, cycle_frames: frames >= cycle_start repeat with period cycle_frames (0: not
+    periodic; frames past the end hold the last one), each cycle shifted by `shift` (3,).
+    """
+
+    body: Body
+    fps: float
+    frames: np.ndarray
+    vel: np.ndarray
+    offsets: np.ndarray
+    cycle_start: int
+    cycle_frames: int
+    shift: np.ndarray
+    notes: list[str]
+
+    def index(self, i: int) -> tuple[int, int]:
+        """frame i -> (distinct frame k, cycles completed)."""
+        i = max(int(i), 0)
+        if self.cycle_frames and i >= self.cycle_start:
+            c, r = divmod(i - self.cycle_start, self.cycle_frames)
+            return self.cycle_start + r, c
+        return min(i, len(self.frames) - 1), 0
+
+    def offset(self, i: int) -> np.ndarray:
+        k, c = self.index(i)
+        return self.offsets[k] + c * self.shift
+
+    def offset_at(self, t: float) -> np.ndarray:
+        """Root offset at time t (s), linear between frames."""
+        f = max(t, 0.0) * self.fps
+        i = int(math.floor(f))
+        a = f - i
+        return (1.0 - a) * self.offset(i) + a * self.offset(i + 1)
+
+    def vertices(self, i: int) -> np.ndarray:
+        k, _ = self.index(i)
+        return self.frames[k].astype(np.float64) + self.offset(i)
+
+    def velocities(self, i: int) -> np.ndarray:
+        return self.vel[self.index(i)[0]].astype(np.float64)
+
+    @property
+    def periodic(self) -> bool:
+        return self.cycle_frames > 0
+
+
+# ----------------------------------------------------------------------------------------------
+# the walk
+
+
+def _rot(axis: str, deg: float) -> np.ndarray:
+    a = math.radians(deg)
+    c, s = math.cos(a), math.sin(a)
+    if axis == "x":
+        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+    if axis == "y":
+        return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def _bump(p: float, centre: float, width: float) -> float:
+    d = (p - centre + 0.5) % 1.0 - 0.5
+    return math.exp(-0.5 * (d / width) ** 2)
+
+
+def gait_deltas(phase: float, amp: float, weight: float) -> dict[str, np.ndarray]:
+    """Joint rotations (3x3, about the joint, in the rest pose's world axes) at gait phase
+    `phase` (0..1, left heel strike at 0); amp scales the hip swing (stride), weight (0..1) the
+    whole pose (the ramp from rest). X is the body's left, Y up, Z forward."""
+    out = {}
+    for side, p in (("L", phase % 1.0), ("R", (phase + 0.5) % 1.0)):
+        c = math.cos(2 * math.pi * p)
+        hip = amp * (10.0 + 20.0 * c)
+        knee = 3.0 + 15.0 * _bump(p, 0.15, 0.07) + 57.0 * _bump(p, 0.72, 0.11)
+        ankle = 9.0 * _bump(p, 0.45, 0.12) - 17.0 * _bump(p, 0.63, 0.06) - 4.0 * _bump(p, 0.06, 0.04)
+        out[f"upperleg01.{side}"] = _rot("x", -weight * hip)  # flexion: the thigh swings forward
+        out[f"lowerleg01.{side}"] = _rot("x", weight * knee)  # flexion: the shank swings back
+        out[f"foot.{side}"] = _rot("x", -weight * ankle)  # dorsiflexion: toes up
+        # the arm swings with the opposite leg: forward when that leg is forward
+        q = (p + 0.5) % 1.0
+        cq = math.cos(2 * math.pi * q)
+        toward = -6.0 if side == "L" else 6.0  # closer to the body than the A-pose (about Z)
+        out[f"upperarm01.{side}"] = _rot("x", -weight * 14.0 * amp * cq) @ _rot("z", weight * toward)
+        out[f"lowerarm01.{side}"] = _rot("x", -weight * (-8.0 + 8.0 * cq))  # the rest pose bends it ~45
+    c = math.cos(2 * math.pi * phase)
+    out["root"] = _rot("y", -weight * 4.0 * amp * c)  # the pelvis turns with the forward (left) leg
+    out["spine01"] = _rot("y", weight * 6.0 * amp * c)  # the thorax turns against it
+    return out
+
+
+def pose_joints(rig: Rig, deltas: dict[str, np.ndarray]) -> np.ndarray:
+    """(J, 4, 4) posed world transforms: each named joint rotated about itself by its delta
+    (in the rest pose's world axes), children following."""
+    rest = rig.rest_transforms
+    idx = {n: i for i, n in enumerate(rig.joint_names)}
+    d = {}
+    for name, r in deltas.items():
+        j = idx[name]
+        rr = rest[j, :3, :3]
+        t = np.eye(4)
+        t[:3, :3] = rr.T @ r @ rr
+        d[j] = t
+    local = _local_rest(rig)
+    g = np.empty_like(rest)
+    for j in range(len(rest)):
+        p = rig.parents[j]
+        m = rest[j] if p < 0 else g[p] @ local[j]
+        g[j] = m @ d[j] if j in d else m
+    return g
+
+
+_LOCAL_CACHE: dict[int, np.ndarray] = {}
+
+
+def _local_rest(rig: Rig) -> np.ndarray:
+    key = id(rig.rest_transforms)
+    if key not in _LOCAL_CACHE:
+        rest = rig.rest_transforms
+        local = np.empty_like(rest)
+        for j in range(len(rest)):
+            p = rig.parents[j]
+            local[j] = rest[j] if p < 0 else np.linalg.inv(rest[p]) @ rest[j]
+        _LOCAL_CACHE.clear()
+        _LOCAL_CACHE[key] = local
+    return _LOCAL_CACHE[key]
+
+
+class _Walker:
+    """Poses and plants the walk for one body."""
+
+    def __init__(self, body: Body, params: WalkParams):
+        if body.rig is None:
+            raise InputError("this body has no skeleton, so it cannot walk: use default:female / default:male, "
+                             "or a scan (its skeleton is fitted from the default body)")
+        self.body, self.rig, self.p = body, body.rig, params
+        names = set(body.rig.joint_names)
+        missing = [n for n in gait_deltas(0.0, 1.0, 1.0) if n not in names]
+        if missing:
+            raise InputError(f"the body's skeleton lacks the joints {', '.join(missing)} the walk moves")
+        rv = body.vertices
+        legs = np.zeros(len(rv), bool) if body.segments is None else np.isin(
+            body.segments, [SEGMENT_ID["left_leg"], SEGMENT_ID["right_leg"]])
+        feet = np.flatnonzero(legs & (rv[:, 1] < 0.12 * body.height))
+        if len(feet) < 10:
+            feet = np.flatnonzero(rv[:, 1] < 0.06 * body.height)
+        self.feet = feet
+        self.left_foot = rv[feet, 0] > 0  # the body's left is +x
+        self.feet_rest = np.ascontiguousarray(rv[feet])
+        self.feet_idx = np.ascontiguousarray(self.rig.skin_indices[feet], dtype=np.int32)
+        self.feet_w = np.ascontiguousarray(self.rig.skin_weights[feet], dtype=np.float64)
+        self.amp = 1.0
+        self.period = 1.0
+
+    def deltas(self, t: float) -> dict[str, np.ndarray]:
+        """The pose at time t: during the ramp the pose weight w = smoothstep(t / ramp) grows
+        from 0 (rest) to 1 while the gait's clock runs at w times its speed, from mid-stance of
+        the left leg (its foot under the body, the right foot lifting); after it, the cycle."""
+        r = self.p.ramp
+        if r > 0 and t < r:
+            x = t / r
+            w = x * x * (3.0 - 2.0 * x)
+            run = r * (x ** 3 - 0.5 * x ** 4)  # integral of smoothstep from 0 to t
+        else:
+            w, run = 1.0, 0.5 * r + (t - r)
+        return gait_deltas((START_PHASE + run / self.period) % 1.0, self.amp, w)
+
+    def feet_at(self, t: float) -> np.ndarray:
+        m = joint_matrices(self.rig, pose_joints(self.rig, self.deltas(t)))
+        out = np.empty_like(self.feet_rest)
+        _skin_kernel(self.feet_rest, self.feet_idx, self.feet_w, m, out)
+        return out
+
+    def plant(self, t0: float, t1: float, steps: int, off0: np.ndarray):
+        """Root offsets (steps+1, 3) (x, z planted; y the lift) from t0 to t1."""
+        ts = np.linspace(t0, t1, steps + 1)
+        offs = np.zeros((steps + 1, 3))
+        offs[0] = off0
+        prev = self.feet_at(ts[0])
+        offs[0, 1] = -prev[:, 1].min()
+        for k in range(1, steps + 1):
+            cur = self.feet_at(ts[k])
+            c = int(np.argmin(prev[:, 1]))  # the point the body stands on
+            offs[k, 0] = offs[k - 1, 0] - (cur[c, 0] - prev[c, 0])
+            offs[k, 2] = offs[k - 1, 2] - (cur[c, 2] - prev[c, 2])
+            offs[k, 1] = -cur[:, 1].min()
+            prev = cur
+        return ts, offs
+
+
+def walk_track(body: Body, params: WalkParams | None = None, fps: float = 30.0) -> BodyTrack:
+    """Sample the walk of `body` (rigged) at `fps`: the ramp from rest, then one cycle."""
+    p = params or WalkParams()
+    p.validate()
+    if not (5.0 <= fps <= 240.0):
+        raise InputError(f"frame rate {fps} is out of range (5 .. 240 frames per second)")
+    w = _Walker(body, p)
+    stride = p.stride if p.stride is not None else 0.82 * body.height
+    # the cycle lasts a whole number of frames (so its maps repeat exactly)
+    n_cycle = max(4, int(round(stride / p.speed * fps)))
+    w.period = n_cycle / fps
+    n_ramp = int(math.ceil(p.ramp * fps))
+    ramp_t = n_ramp / fps
+    w.p = WalkParams(speed=p.speed, stride=stride, in_place=p.in_place, ramp=ramp_t)
+    # scale the hip swing until one cycle covers the stride (it is nearly linear in the amplitude)
+    for _ in range(4):
+        _, offs = w.plant(ramp_t, ramp_t + w.period, n_cycle * FINE, np.zeros(3))
+        got = float(offs[-1, 2] - offs[0, 2])
+        if got <= 1e-3:
+            raise InputError("the walk cycle does not move the body forward (the skeleton's legs may not face +Z)")
+        w.amp = float(np.clip(w.amp * stride / got, 0.2, 2.0))
+        if abs(got - stride) < 0.005 * stride:
+            break
+    # plant over the ramp and one cycle
+    n = n_ramp + n_cycle
+    ts, offs = w.plant(0.0, n / fps, n * FINE, np.zeros(3))
+    shift = offs[-1] - offs[n_ramp * FINE]
+    shift[1] = 0.0
+    if p.in_place:
+        offs[:, [0, 2]] = 0.0
+        shift[:] = 0.0
+    frame_offs = offs[::FINE][:n].copy()
+    rig, rv = body.rig, body.vertices
+    idx = np.ascontiguousarray(rig.skin_indices, dtype=np.int32)
+    wts = np.ascontiguousarray(rig.skin_weights, dtype=np.float64)
+    frames = np.empty((n, len(rv), 3), np.float32)
+    vel = np.empty_like(frames)
+    h = 1.0 / (fps * FINE)
+    buf = np.empty_like(rv)
+    for i in range(n):
+        t = i / fps
+        m = joint_matrices(rig, pose_joints(rig, w.deltas(t)))
+        _skin_kernel(rv, idx, wts, m, buf)
+        frames[i] = buf + (0.0, frame_offs[i, 1], 0.0)
+        # world velocity: central difference over one fine step, the root's motion included
+        pos = []
+        for s in (-1, 1):
+            k = i * FINE + s
+            o = offs[0] if k < 0 else offs[k] if k < len(offs) else 2 * offs[-1] - offs[-2]
+            m = joint_matrices(rig, pose_joints(rig, w.deltas(t + s * h)))
+            _skin_kernel(rv, idx, wts, m, buf)
+            pos.append(buf + o)
+        vel[i] = (pos[1] - pos[0]) / (2 * h)
+    frame_offs[:, 1] = 0.0  # the lift is in the frames
+    speed = float(np.linalg.norm(shift)) / w.period if not p.in_place else stride / w.period
+    notes = [f"walk: {speed:.2f} m/s, stride {stride:.2f} m, cycle {w.period:.3f} s = {n_cycle} frames at "
+             f"{fps:g} fps, ramp from rest {ramp_t:.2f} s" + (", in place (treadmill)" if p.in_place else "")]
+    return BodyTrack(body=body, fps=float(fps), frames=frames, vel=vel, offsets=frame_offs,
+                     cycle_start=n_ramp, cycle_frames=n_cycle, shift=shift, notes=notes)
