@@ -205,6 +205,67 @@ def drape_cmd(
     _run(go)
 
 
+@app.command("walk")
+def walk_cmd(
+    body: str = typer.Option(..., "--body", help=BODY_HELP),
+    garment: str = typer.Option(..., "--garment", help="A catalogue garment (see `tryon garments`) or a "
+                                "GarmentCode pattern file (.json)."),
+    size: Optional[str] = typer.Option(None, "--size", help="Catalogue size: XS, S, M, L, XL, XXL (default M)."),
+    fabric: str = typer.Option("cotton", "--fabric", help="cotton, denim, silk or jersey."),
+    seconds: float = typer.Option(4.0, "--seconds", help="How long to walk (s), after dressing."),
+    fps: float = typer.Option(30.0, "--fps", help="Body frames (and output frames) per second."),
+    speed: float = typer.Option(1.2, "--speed", help="Walking speed in m/s (1.2 is a normal walk)."),
+    stride: Optional[float] = typer.Option(None, "--stride", help="Stride (two steps) in m; default 0.82 x height."),
+    in_place: bool = typer.Option(False, "--in-place", help="Walk on the spot (a treadmill) instead of forward."),
+    out: Path = typer.Option(Path("out/walk"), "--out", help="Output directory."),
+    resolution: float = typer.Option(1.5, "--resolution", help="Cloth edge length in cm."),
+    texel: float = typer.Option(5.0, "--texel", help="Collision map texel in mm."),
+    reuse_maps: bool = typer.Option(True, "--reuse-maps/--maps-every-frame",
+                                    help="Render one walk cycle of maps and reuse it, or render every frame."),
+    velocity_mode: str = typer.Option("average", "--velocity-mode",
+                                      help="Super-elasticity rule while walking: average (eq. 5), directional "
+                                      "(eq. 6; not yet stable) or zero."),
+    up: Optional[str] = typer.Option(None, "--up", help=UP_HELP),
+    front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP),
+):
+    """Dress a body (as `tryon drape`), then walk it: write anim.glb (plays in any glTF viewer),
+    strip.png (frames side by side) and report.json."""
+
+    def go():
+        from engine.body.motion import WalkParams
+        from engine.scene.drape import DrapeOptions
+        from engine.scene.garments import resolve_garment
+        from engine.scene.tryon import run_tryon
+        from engine.scene.walk import WalkOptions, walk_cloth, walk_report, write_walk_outputs
+
+        wo = WalkOptions(seconds=seconds, fps=fps, reuse_maps=reuse_maps, velocity_mode=velocity_mode,
+                         walk=WalkParams(speed=speed, stride=stride, in_place=in_place))
+        wo.validate()  # refuse before dressing
+        b = _body(body, up, front)
+        if b.rig is None:
+            from engine.errors import InputError
+
+            raise InputError("this body has no skeleton, so it cannot walk yet: use default:female or default:male "
+                             "(fitting the skeleton to a scan is not built yet)")
+        spec, place, name = resolve_garment(garment, b, size)
+        prog, update = _progress_printer()
+        with prog:
+            res, report = run_tryon(b, spec, fabric=fabric, h=resolution / 100.0, texel=texel / 1000.0,
+                                    options=DrapeOptions(fabric=fabric), place=place, source=name, progress=update)
+            w = walk_cloth(b, res, wo, texel=texel / 1000.0, tol=res.model.params.tolerance, progress=update)
+        full = walk_report(report, w.report)
+        for p in write_walk_outputs(out, b, w, full):
+            typer.echo(str(p))
+        r = w.report
+        typer.echo(f"{report['cloth_vertices']} cloth vertices; dressed in {report['wall_seconds']['total']:.1f} s; "
+                   f"walked {r['frames']} frames at {r['fps']:g} fps in {r['wall_seconds']['walking']:.1f} s "
+                   f"(realtime factor {r['realtime_factor']:.2f}; {r['ms_per_frame']['total']:.0f} ms/frame); "
+                   f"penetration max {r['penetration_mm']['max']:.1f} mm p99 {r['penetration_mm']['p99']:.1f} mm; "
+                   f"strain max {100 * r['strain_max']:.1f} %")
+
+    _run(go)
+
+
 @app.command("garments")
 def garments_cmd():
     """List the catalogue garments (names for `tryon drape --garment`), with their sizes."""

@@ -7,7 +7,8 @@ the body between frames extrapolated along its surface velocity (seed 000 §4-5)
         solver.step(state)              # queries collider.query(points)
 
 Between frames: the maps of the nearest frame k (time t_k) answer, and the surface is moved
-along its normal by its velocity: a point's penetration grows by (v . n) (t - t_k). The maps are
+along its normal by its velocity relative to the root (whose travel is applied exactly, below):
+a point's penetration grows by ((v - v_root) . n) (t - t_k). The maps are
 asked with the tolerance widened by the most the surface can move in that time, then each answer
 is re-classified (clear / band / inside) with the corrected penetration. The root's horizontal
 travel is exact: maps are rendered relative to it (track frames), and points are moved into
@@ -33,12 +34,14 @@ from engine.jit import serial_kernel
 
 
 @serial_kernel
-def _retime(status, penetration, normal, velocity, widened, shift_t, tol):
-    """Re-classify map answers for a surface moved by velocity * shift_t along its normal."""
+def _retime(status, penetration, normal, velocity, root_v, widened, shift_t, tol):
+    """Re-classify map answers for a surface moved by (velocity - root_v) * shift_t along its
+    normal (the maps move with the root; its own travel is applied exactly)."""
     for i in range(status.shape[0]):
         if status[i] == 0:
             continue
-        un = velocity[i, 0] * normal[i, 0] + velocity[i, 1] * normal[i, 1] + velocity[i, 2] * normal[i, 2]
+        un = ((velocity[i, 0] - root_v[0]) * normal[i, 0] + (velocity[i, 1] - root_v[1]) * normal[i, 1]
+              + (velocity[i, 2] - root_v[2]) * normal[i, 2])
         p = penetration[i] - widened + un * shift_t
         penetration[i] = p
         if p > tol:
@@ -62,6 +65,7 @@ class TrackCollider:
         self._k = -1
         self.maps: CollisionMaps | None = None
         self._vmax = 0.0
+        self._root_v = np.zeros(3)
         self._shift_t = 0.0
         self._offset = np.zeros(3)
         self._n = -1
@@ -100,7 +104,10 @@ class TrackCollider:
                 self.maps.surf = self.maps.vel = None  # the float16 copies are kept
             self.maps = self._frame_maps(k)
             self._k = k
-            self._vmax = float(np.abs(tr.vel[k]).max()) * np.sqrt(3.0)
+            self._root_v = (tr.offset(i + 1) - tr.offset(i - 1)) * tr.fps / 2 if i > 0 else \
+                (tr.offset(1) - tr.offset(0)) * tr.fps
+            rel = tr.vel[k].astype(np.float64) - self._root_v
+            self._vmax = float(np.sqrt(np.einsum("ij,ij->i", rel, rel).max()))
         self._shift_t = t - i / tr.fps
         self._offset = tr.offset_at(t)
         self.version += 1  # every step: the body moves
@@ -122,7 +129,8 @@ class TrackCollider:
         widened = self._vmax * abs(self._shift_t)
         query_batch_serial(self.local, self.tol + widened, *self.maps.kernel_args(), self.status, self.surface,
                            self.depth, self.normal, self.velocity, self.map_index)
-        _retime(self.status, self.depth, self.normal, self.velocity, widened, self._shift_t, self.tol)
+        _retime(self.status, self.depth, self.normal, self.velocity, self._root_v, widened, self._shift_t,
+                self.tol)
         return self.status, self.normal, self.velocity, self.depth
 
     def release(self) -> None:

@@ -50,6 +50,11 @@ class WalkOptions:
         if not (5.0 <= self.fps <= 120.0):
             raise InputError(f"--fps {self.fps}: use 5 .. 120 frames per second")
         self.walk.validate()
+        from engine.cloth.kernels import VM_MODES
+
+        if self.velocity_mode is not None and self.velocity_mode not in VM_MODES:
+            raise InputError(f"unknown velocity modification '{self.velocity_mode}'; "
+                             f"choose one of: {', '.join(VM_MODES)}")
 
 
 @dataclass
@@ -117,10 +122,6 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
     if o.velocity_mode is not None:
         from dataclasses import replace
 
-        from engine.cloth.kernels import VM_MODES
-
-        if o.velocity_mode not in VM_MODES:
-            raise InputError(f"unknown velocity modification '{o.velocity_mode}'; choose one of: {', '.join(VM_MODES)}")
         model = replace(model, params=replace(model.params, velocity_mode=o.velocity_mode))
     frame_time = 1.0 / track.fps
     sub = max(1, math.ceil(frame_time / drape.dt - 1e-9))
@@ -187,6 +188,18 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
         "per_frame": per_frame,
     }
     return WalkResult(garment_frames=frames, triangles=drape.triangles, track=track, report=report)
+
+
+def walk_report(drape_report: dict, walk: dict) -> dict:
+    """The walk's report: the drape's fields (dressing the standing body), then the walk's
+    headline fields at the top level (frames, fps, realtime_factor, ms_per_frame, per_frame),
+    the rest under "walk"; left_out holds both stages' choices."""
+    top = ("frames", "fps", "realtime_factor", "ms_per_frame", "per_frame")
+    out = dict(drape_report)
+    out.update({k: walk[k] for k in top})
+    out["walk"] = {k: v for k, v in walk.items() if k not in top and k != "left_out"}
+    out["left_out"] = list(drape_report.get("left_out", [])) + list(walk.get("left_out", []))
+    return out
 
 
 def write_walk_outputs(out, body: Body, walk: WalkResult, report: dict, panels: int = 8,

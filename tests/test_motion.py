@@ -1,0 +1,115 @@
+"""The walk cycle (engine.body.motion) and the numba skinning kernel."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from engine.body.default import default_body
+from engine.body.motion import WalkParams, gait_deltas, pose_joints, walk_track
+from engine.body.rig import skin, skin_fast
+from engine.errors import InputError
+
+
+@pytest.fixture(scope="module")
+def female():
+    return default_body("female")
+
+
+@pytest.fixture(scope="module")
+def track(female):
+    return walk_track(female, WalkParams(speed=1.2), fps=30)
+
+
+def test_skin_fast_matches_reference(female):
+    g = pose_joints(female.rig, gait_deltas(0.37, 1.0, 1.0))
+    ref = skin(female.vertices, female.rig, g)
+    fast = skin_fast(female.vertices, female.rig, g)
+    assert np.abs(fast - ref).max() < 1e-9
+    # and the pose really moved the body (the test is not comparing two rest poses)
+    assert np.abs(ref - female.vertices).max() > 0.1
+
+
+def test_rest_pose_is_identity(female):
+    g = pose_joints(female.rig, gait_deltas(0.0, 1.0, 0.0))
+    # (float32 weights sum to 1 within ~1e-7: a micrometre)
+    assert np.abs(skin_fast(female.vertices, female.rig, g) - female.vertices).max() < 1e-5
+
+
+def test_walk_starts_at_rest(female, track):
+    assert np.abs(track.vertices(0) - female.vertices).max() < 1e-5
+    assert np.abs(track.velocities(0)).max() < 0.05
+
+
+def test_feet_on_the_floor_every_frame(track):
+    for i in range(0, 100):
+        y = track.vertices(i)[:, 1]
+        assert abs(y.min()) < 1e-3, (i, y.min())  # no floating, no floor penetration
+
+
+def test_feet_do_not_slide(track):
+    """Body points touching the floor move (horizontally) no faster than 10 cm/s, while the
+    body walks at 1.2 m/s; measured as displacement between frames, not from the velocities."""
+    fps = track.fps
+    worst = 0.0
+    for i in range(track.cycle_start, track.cycle_start + track.cycle_frames):
+        a, b = track.vertices(i), track.vertices(i + 1)
+        on = (a[:, 1] < 0.002) & (b[:, 1] < 0.002)
+        if on.any():
+            worst = max(worst, float(np.linalg.norm((b - a)[on][:, [0, 2]], axis=1).max() * fps))
+    assert worst < 0.1, worst
+
+
+def test_walk_speed_stride_and_period(female, track):
+    period = track.cycle_frames / track.fps
+    assert abs(track.shift[2] / period - 1.2) < 0.03  # the asked speed (cycle rounded to frames)
+    assert abs(track.shift[2] - 0.82 * female.height) < 0.01  # the default stride
+    assert abs(track.shift[0]) < 0.01  # straight ahead (+Z, the way the body faces)
+
+
+def test_cycle_repeats_shifted_by_the_stride(track):
+    a = track.cycle_start + 3
+    b = a + track.cycle_frames
+    assert np.abs(track.vertices(b) - (track.vertices(a) + track.shift)).max() < 1e-5
+    assert np.abs(track.velocities(b) - track.velocities(a)).max() < 1e-5
+
+
+def test_velocities_match_the_motion(female):
+    """The stored world velocities agree with central differences of the frames (at 120 fps:
+    at 30 fps the difference quotient itself is 0.09 m/s off where the pelvis speeds up)."""
+    track = walk_track(female, WalkParams(), fps=120)
+    medians = []
+    for i in range(track.cycle_start + 2, track.cycle_start + track.cycle_frames, 3):
+        fd = (track.vertices(i + 1) - track.vertices(i - 1)) * track.fps / 2
+        err = np.linalg.norm(fd - track.velocities(i), axis=1)
+        medians.append(np.median(err))
+        assert np.percentile(err, 99) < 0.3, (i, np.percentile(err, 99))  # feet swing at 4-5 m/s
+    # the root's speed jumps by ~0.2 m/s where the weight passes to the other foot (planting keeps
+    # the lowest foot point still, and that point jumps from one foot to the other)
+    assert np.median(medians) < 0.01 and max(medians) < 0.3, (np.median(medians), max(medians))
+
+
+def test_in_place_is_a_treadmill(female):
+    t = walk_track(female, WalkParams(in_place=True), fps=30)
+    assert np.abs(t.offsets).max() == 0.0 and np.abs(t.shift).max() == 0.0
+    # the pelvis stays within a few cm of where it started
+    pelvis = t.vertices(40)[female.segments == 1].mean(axis=0) - female.vertices[female.segments == 1].mean(axis=0)
+    assert np.hypot(pelvis[0], pelvis[2]) < 0.1
+
+
+@pytest.mark.parametrize("params, fps, words", [
+    (WalkParams(speed=0.0), 30, "speed"),
+    (WalkParams(speed=50.0), 30, "speed"),
+    (WalkParams(stride=10.0), 30, "stride"),
+    (WalkParams(), 1000, "frame rate"),
+])
+def test_bad_walk_parameters(female, params, fps, words):
+    with pytest.raises(InputError, match=words):
+        walk_track(female, params, fps=fps)
+
+
+def test_body_without_skeleton_cannot_walk(female):
+    from engine.body.types import Body
+
+    with pytest.raises(InputError, match="no skeleton"):
+        walk_track(Body(female.vertices, female.faces), WalkParams(), fps=30)

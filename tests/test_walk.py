@@ -1,0 +1,209 @@
+"""Dynamic cloth on a walking body: the moving collider, the walk stage, the animated GLB and
+the `tryon walk` command."""
+
+from __future__ import annotations
+
+import json
+import struct
+
+import numpy as np
+import pytest
+import trimesh
+from typer.testing import CliRunner
+
+from engine.body.motion import BodyTrack
+from engine.body.types import Body
+from engine.cli import app
+from tests.samples import SAMPLE_BODY
+
+
+def _box_body(size=0.4):
+    m = trimesh.creation.box(extents=(size, size, size))
+    v = np.asarray(m.vertices, np.float64) + (0.0, size / 2, 0.0)
+    return Body(v, np.asarray(m.faces, np.int32))
+
+
+def _sliding_box_track(speed, fps=10.0, frames=6, in_offsets=False):
+    """A box moving +z at `speed`: in its frames (in_offsets False) or as root offset."""
+    body = _box_body()
+    n = len(body.vertices)
+    fr = np.empty((frames, n, 3), np.float32)
+    offs = np.zeros((frames, 3))
+    for k in range(frames):
+        d = np.array([0.0, 0.0, speed * k / fps])
+        if in_offsets:
+            fr[k] = body.vertices
+            offs[k] = d
+        else:
+            fr[k] = body.vertices + d
+    vel = np.zeros_like(fr)
+    vel[:, :, 2] = speed
+    return BodyTrack(body=body, fps=fps, frames=fr, vel=vel, offsets=offs, cycle_start=0, cycle_frames=0,
+                     shift=np.zeros(3), notes=[])
+
+
+def _collider(track):
+    from engine.collide.maps import MapRenderer
+    from engine.collide.moving import TrackCollider
+
+    r = MapRenderer(track.body.faces, texel=0.005, tol=0.005, window=(0.0, 0.5), with_velocity=True)
+    return TrackCollider(track, r, tol=0.005), r
+
+
+@pytest.mark.parametrize("in_offsets", [False, True])
+def test_track_collider_moves_the_surface_between_frames(in_offsets):
+    """Frame 2 of a box sliding +z at 1 m/s has its front face at z = 0.2 + 0.2 = 0.4. A point
+    at z = 0.43 is clear at t = 0.2 s, but 0.04 s later (frame 2 is still the nearest frame) the
+    face is at 0.44 and the point is inside -- whether the motion is in the frames (the surface
+    is moved along its velocity) or in the root offset (applied exactly)."""
+    track = _sliding_box_track(1.0, in_offsets=in_offsets)
+    col, r = _collider(track)
+    try:
+        p = np.array([[0.0, 0.2, 0.43], [0.0, 0.2, 0.5]])
+        col.set_time(0.2)
+        st, n, v, d = col.query(p)
+        assert list(st) == [0, 0]
+        col.set_time(0.24)
+        st, n, v, d = col.query(p)
+        assert st[0] == 2 and st[1] == 0, st
+        assert abs(d[0] - (0.44 - 0.43 + 0.005)) < 0.003  # penetration = depth + tol
+        assert n[0, 2] > 0.9 and abs(v[0, 2] - 1.0) < 1e-3  # outward normal, body velocity
+        assert col.stats["renders"] == 1  # one frame's maps served both times
+    finally:
+        r.release()
+
+
+def test_track_collider_reuses_maps_of_a_periodic_track():
+    track = _sliding_box_track(0.0, frames=4)
+    track.cycle_start, track.cycle_frames = 1, 3
+    col, r = _collider(track)
+    try:
+        for i in range(12):
+            col.set_time(i / track.fps)
+            col.query(np.zeros((1, 3)))
+        assert col.stats["renders"] == 4 and col.stats["reuses"] == 8
+    finally:
+        r.release()
+
+
+def test_anim_glb_round_trip(tmp_path):
+    from engine.io.anim import write_anim_glb
+
+    tri = np.array([[0, 1, 2]])
+    base = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+    frames = np.stack([base + (0, 0, 0.1 * k) for k in range(5)])
+    p = write_anim_glb(tmp_path / "a.glb", [("garment", tri, frames, (70, 110, 190, 255))], fps=10)
+    data = p.read_bytes()
+    magic, version, total = struct.unpack("<4sII", data[:12])
+    assert magic == b"glTF" and version == 2 and total == len(data)
+    jlen = struct.unpack("<I", data[12:16])[0]
+    doc = json.loads(data[20:20 + jlen])
+    prim = doc["meshes"][0]["primitives"][0]
+    assert len(prim["targets"]) == 4
+    anim = doc["animations"][0]
+    times = doc["accessors"][anim["samplers"][0]["input"]]
+    assert times["count"] == 5 and abs(times["max"][0] - 0.4) < 1e-6
+    # the last target moves every vertex by +0.4 in z
+    acc = doc["accessors"][prim["targets"][-1]["POSITION"]]
+    view = doc["bufferViews"][acc["bufferView"]]
+    bin0 = 20 + jlen + 8
+    disp = np.frombuffer(data[bin0 + view["byteOffset"]: bin0 + view["byteOffset"] + view["byteLength"]],
+                         np.float32).reshape(-1, 3)
+    assert np.allclose(disp, [0, 0, 0.4])
+    # and a general glTF reader accepts the file
+    scene = trimesh.load(p)
+    assert len(scene.geometry) == 1
+
+
+def test_anim_glb_refuses_nan(tmp_path):
+    from engine.errors import InputError
+    from engine.io.anim import write_anim_glb
+
+    frames = np.zeros((2, 3, 3), np.float32)
+    frames[1, 0, 0] = np.nan
+    with pytest.raises(InputError, match="non-finite"):
+        write_anim_glb(tmp_path / "a.glb", [("g", np.array([[0, 1, 2]]), frames, (1, 1, 1, 255))], fps=10)
+    assert not (tmp_path / "a.glb").exists()
+
+
+@pytest.fixture(scope="module")
+def walked():
+    """A coarse skirt (3 cm cloth edge) dressed on the default woman, then 0.8 s of walking
+    (the 0.5 s ramp from rest and 0.3 s of the full walk)."""
+    from engine.body.default import default_body
+    from engine.scene.garments import resolve_garment
+    from engine.scene.tryon import run_tryon
+    from engine.scene.walk import WalkOptions, walk_cloth, walk_report
+
+    body = default_body("female")
+    spec, place, name = resolve_garment("skirt", body, "M")
+    res, rep = run_tryon(body, spec, h=0.03, place=place, source=name)
+    w = walk_cloth(body, res, WalkOptions(seconds=0.8), texel=0.005, tol=res.model.params.tolerance)
+    return body, res, w, walk_report(rep, w.report)
+
+
+def test_walking_skirt_stays_on_and_out_of_the_body(walked):
+    body, res, w, report = walked
+    assert np.all(np.isfinite(w.garment_frames))
+    r = w.report
+    assert r["frames"] == 24 and len(r["per_frame"]) == 24
+    assert r["penetration_mm"]["p99"] <= 2.0 and r["penetration_mm"]["max"] <= 10.0, r["penetration_mm"]
+    assert r["strain_max"] < 0.15
+    # the garment follows the body: its centre moves forward with the pelvis, within 5 cm
+    tr = w.track
+    pelvis = body.segments == 1
+    for i in (8, 16, 24):
+        body_c = tr.vertices(i)[pelvis].mean(axis=0) - body.vertices[pelvis].mean(axis=0)
+        cloth_c = w.garment_frames[i].mean(axis=0) - w.garment_frames[0].mean(axis=0)
+        assert abs(cloth_c[2] - body_c[2]) < 0.05, (i, cloth_c, body_c)
+    assert body_c[2] > 0.2  # and the body did walk (0.5 s of ramp, then 0.3 s at 1.2 m/s)
+    # the skirt is still at the waist: its top within 5 cm of where the drape left it (relative)
+    top0 = res.positions[:, 1].max()
+    assert abs(w.garment_frames[-1][:, 1].max() - top0) < 0.05
+
+
+def test_walk_report_fields(walked):
+    _, _, w, report = walked
+    for key in ("cloth_vertices", "iterations", "penetration_mm", "strain", "settled", "frames", "fps",
+                "realtime_factor", "ms_per_frame", "per_frame", "walk", "left_out"):
+        assert key in report, key
+    assert set(report["ms_per_frame"]) == {"maps", "cloth", "collision", "total"}
+    assert report["realtime_factor"] > 0
+    assert any("periodic" in line for line in report["left_out"])
+    assert report["walk"]["map_frames_rendered"] <= 15 + 40  # the ramp and at most a cycle
+
+
+def test_walk_outputs(walked, tmp_path):
+    from PIL import Image
+
+    from engine.scene.walk import write_walk_outputs
+
+    body, _, w, report = walked
+    paths = write_walk_outputs(tmp_path, body, w, report, panels=4, size=200)
+    names = sorted(p.name for p in paths)
+    assert names == ["anim.glb", "report.json", "strip.png"]
+    im = Image.open(tmp_path / "strip.png")
+    assert im.size[0] > 1.5 * im.size[1]  # a row of 4 frames (each a side view, narrower than tall)
+    assert json.loads((tmp_path / "report.json").read_text())["frames"] == 24
+
+
+def _walk_cli(tmp_path, *args):
+    return CliRunner().invoke(app, ["walk", "--out", str(tmp_path / "o"), *map(str, args)])
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--body", "default:female", "--garment", "skirt", "--seconds", "0"], "--seconds"),
+    (["--body", "default:female", "--garment", "skirt", "--speed", "40"], "speed"),
+    (["--body", "default:female", "--garment", "skirt", "--fps", "1000"], "--fps"),
+    (["--body", "default:female", "--garment", "skirt", "--velocity-mode", "wobble"], "wobble"),
+    (["--body", str(SAMPLE_BODY), "--garment", "skirt"], "no skeleton"),
+])
+def test_walk_cli_refuses_bad_input(tmp_path, monkeypatch, args, words):
+    from engine.cloth.solver import ClothSolver
+
+    monkeypatch.setattr(ClothSolver, "step", lambda *a, **k: (_ for _ in ()).throw(AssertionError("simulated")))
+    r = _walk_cli(tmp_path, *args)
+    assert r.exit_code == 2, (r.exit_code, r.output)
+    err = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
+    assert len(err) == 1 and words in err[0], r.stderr
+    assert not (tmp_path / "o" / "anim.glb").exists()
