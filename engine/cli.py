@@ -242,11 +242,11 @@ def walk_cmd(
                          walk=WalkParams(speed=speed, stride=stride, in_place=in_place))
         wo.validate()  # refuse before dressing
         b = _body(body, up, front)
-        if b.rig is None:
-            from engine.errors import InputError
+        if b.rig is None:  # a scan: give it the default body's skeleton and weights
+            from engine.body.fit import fit_rig
 
-            raise InputError("this body has no skeleton, so it cannot walk yet: use default:female or default:male "
-                             "(fitting the skeleton to a scan is not built yet)")
+            b = fit_rig(b)
+            typer.echo(f"note: {b.notes[-1]}", err=True)
         spec, place, name = resolve_garment(garment, b, size)
         prog, update = _progress_printer()
         with prog:

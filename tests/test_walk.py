@@ -196,11 +196,14 @@ def _walk_cli(tmp_path, *args):
     (["--body", "default:female", "--garment", "skirt", "--speed", "40"], "speed"),
     (["--body", "default:female", "--garment", "skirt", "--fps", "1000"], "--fps"),
     (["--body", "default:female", "--garment", "skirt", "--velocity-mode", "wobble"], "wobble"),
-    (["--body", str(SAMPLE_BODY), "--garment", "skirt"], "no skeleton"),
+    (["--body", "{pillar}", "--garment", "skirt"], "arm"),
 ])
 def test_walk_cli_refuses_bad_input(tmp_path, monkeypatch, args, words):
     from engine.cloth.solver import ClothSolver
 
+    pillar = tmp_path / "pillar.obj"  # a 1.7 m "scan" without arms: no skeleton can be fitted
+    trimesh.creation.cylinder(radius=0.15, height=1.7, sections=32).export(pillar)
+    args = [a.replace("{pillar}", str(pillar)) for a in args]
     monkeypatch.setattr(ClothSolver, "step", lambda *a, **k: (_ for _ in ()).throw(AssertionError("simulated")))
     r = _walk_cli(tmp_path, *args)
     assert r.exit_code == 2, (r.exit_code, r.output)

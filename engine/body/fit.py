@@ -1,0 +1,169 @@
+"""Give a scan the default body's skeleton and skinning weights, so that it can walk.
+
+    rigged = fit_rig(scan)            # scan: a normalised Body without a rig
+
+1. The template: the default body of the scan's stature (female unless `preset` says male).
+2. Its arms are posed like the scan's: the direction of each scan arm (a line fitted to the scan
+   points beside the torso, between the crotch and the shoulders) is given to the template's
+   upper arm and forearm (rotations about the shoulder and elbow joints).
+3. The posed template is mapped onto the scan from landmarks (engine.body.measure): heights
+   piecewise-linearly through floor, knee, crotch, hip, waist, bust, shoulder and top of the head;
+   widths and depths scaled by the ratio of the circumferences at the nearest landmark (hips,
+   waist, bust; the legs take the hips', the head none).
+4. Joints: the template's posed joints, mapped the same way. Weights and segment labels: each
+   scan vertex takes those of the nearest mapped template vertex.
+
+Limits: a scan in a very different pose (arms down at the sides, crossed legs) gets wrong weights
+where limbs touch; the scan must be normalised (Y up, facing +Z, feet on y = 0: engine.body.load).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from engine.body.motion import pose_joints
+from engine.body.rig import joint_matrices, _skin_kernel
+from engine.body.types import SEGMENT_ID, Body, Rig
+from engine.errors import InputError
+
+
+def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking direction a to direction b (3x3)."""
+    a = a / np.linalg.norm(a)
+    b = b / np.linalg.norm(b)
+    v = np.cross(a, b)
+    c = float(np.dot(a, b))
+    s = float(np.linalg.norm(v))
+    if s < 1e-9:
+        return np.eye(3) if c > 0 else -np.eye(3)
+    k = v / s
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + s * kx + (1 - c) * (kx @ kx)
+
+
+def scan_arm_directions(scan: Body, m) -> dict[str, np.ndarray]:
+    """Unit direction (shoulder -> hand) of each arm of the scan: the main axis of the scan's
+    points well outside the torso, between the crotch and the shoulders."""
+    v = scan.vertices
+    half = 0.5 * m.shoulder_width
+    out = {}
+    for side, sign in (("L", 1.0), ("R", -1.0)):
+        sel = (sign * v[:, 0] > half + 0.06) & (v[:, 1] > m.crotch_height) & (v[:, 1] < m.shoulder_height)
+        if sel.sum() < 50:
+            raise InputError(f"cannot find the scan's {'left' if sign > 0 else 'right'} arm away from the torso: "
+                             "the walk needs a scan in an A-pose (arms apart from the body)")
+        p = v[sel]
+        c = p.mean(axis=0)
+        _, _, vt = np.linalg.svd(p - c, full_matrices=False)
+        d = vt[0]
+        if d[1] > 0:  # shoulder -> hand points down
+            d = -d
+        out[side] = d
+    return out
+
+
+def _landmarks(m) -> tuple[list[float], list[str]]:
+    names = ["knee_height", "crotch_height", "hip_height", "waist_height", "bust_height", "shoulder_height", "height"]
+    ys = [getattr(m, n) for n in names]
+    return ys, names
+
+
+def _height_map(src, dst):
+    """Piecewise-linear y mapping through matching landmark heights (and the floor)."""
+    ys, names = _landmarks(src)
+    yd, _ = _landmarks(dst)
+    pairs = [(0.0, 0.0)] + [(a, b) for a, b, n in zip(ys, yd, names) if np.isfinite(a) and np.isfinite(b)]
+    pairs.sort()
+    xs = np.array([p[0] for p in pairs])
+    ys2 = np.array([p[1] for p in pairs])
+    if np.any(np.diff(xs) <= 0) or np.any(np.diff(ys2) <= 0):
+        raise InputError("the scan's landmark heights are out of order (knee, crotch, hips, waist, bust, shoulders); "
+                         "is it standing upright, feet on the floor?")
+
+    def f(y):
+        scale = ys2[-1] / xs[-1]
+        return np.where(y > xs[-1], y * scale, np.interp(y, xs, ys2))
+    return f
+
+
+def _width_scale(src, dst):
+    """Horizontal scale per height: the circumference ratio at the nearest landmark."""
+    def ratio(a, b):
+        r = b / a if (np.isfinite(a) and np.isfinite(b) and a > 0) else 1.0
+        return float(np.clip(r, 0.6, 1.8))
+    hips, waist, bust = ratio(src.hips, dst.hips), ratio(src.waist, dst.waist), ratio(src.bust, dst.bust)
+    ys = np.array([src.crotch_height, src.hip_height, src.waist_height, src.bust_height, src.shoulder_height,
+                   src.shoulder_height + 0.08])
+    rs = np.array([hips, hips, waist, bust, bust, 1.0])
+    ok = np.isfinite(ys)
+
+    def f(y):
+        return np.interp(y, ys[ok], rs[ok])
+    return f
+
+
+def fit_rig(scan: Body, preset: str = "female") -> Body:
+    """A copy of `scan` with a Rig and segment labels fitted from the default body."""
+    from scipy.spatial import cKDTree
+
+    from engine.body.default import default_body
+    from engine.body.measure import measure
+
+    if scan.rig is not None:
+        return scan
+    h = scan.height
+    if not (1.40 <= h <= 2.10):
+        raise InputError(f"the scan is {h:.2f} m tall; fitting a skeleton needs a standing adult of 1.40 .. 2.10 m")
+    tmpl = default_body(preset, height=h)
+    rig = tmpl.rig
+    ms = measure(scan)
+    # 2. pose the template's arms like the scan's
+    idx = {n: i for i, n in enumerate(rig.joint_names)}
+    rest = rig.rest_transforms
+    dirs = scan_arm_directions(scan, ms)
+    deltas = {}
+    for side in ("L", "R"):
+        sh, el, wr = (rest[idx[f"{n}.{side}"], :3, 3] for n in ("upperarm01", "lowerarm01", "wrist"))
+        d_up = _rotation_between(el - sh, dirs[side])
+        fore = d_up @ (wr - el)
+        d_fore = d_up.T @ _rotation_between(fore, dirs[side]) @ d_up
+        deltas[f"upperarm01.{side}"] = d_up
+        deltas[f"lowerarm01.{side}"] = d_fore
+    g = pose_joints(rig, deltas)
+    posed = np.empty_like(tmpl.vertices)
+    _skin_kernel(tmpl.vertices, np.ascontiguousarray(rig.skin_indices, np.int32),
+                 np.ascontiguousarray(rig.skin_weights, np.float64), joint_matrices(rig, g), posed)
+    mt = measure(Body(posed, tmpl.faces))
+    # 3. map the posed template onto the scan
+    fy, fw = _height_map(mt, ms), _width_scale(mt, ms)
+    c_t = _torso_centre(posed, tmpl.segments)
+    c_s = np.array([0.0, 0.0, 0.0])
+
+    def mapped(p):
+        q = np.empty_like(p)
+        s = fw(p[:, 1])
+        q[:, 0] = (p[:, 0] - c_t[0]) * s + c_s[0]
+        q[:, 2] = (p[:, 2] - c_t[2]) * s + c_s[2]
+        q[:, 1] = fy(p[:, 1])
+        return q
+
+    tv = mapped(posed)
+    joints = g.copy()
+    joints[:, :3, 3] = mapped(g[:, :3, 3])
+    # 4. weights and segments from the nearest mapped template vertex
+    dist, near = cKDTree(tv).query(scan.vertices)
+    new_rig = Rig(joint_names=list(rig.joint_names), parents=rig.parents.copy(), rest_transforms=joints,
+                  skin_indices=rig.skin_indices[near].copy(), skin_weights=rig.skin_weights[near].copy())
+    notes = list(scan.notes) + [f"skeleton and weights fitted from the default {preset} body "
+                                f"(median distance scan -> template {np.median(dist) * 1000:.0f} mm, "
+                                f"95 % {np.percentile(dist, 95) * 1000:.0f} mm)"]
+    return Body(vertices=scan.vertices, faces=scan.faces, name=scan.name, segments=tmpl.segments[near].copy(),
+                rig=new_rig, notes=notes, to_world=scan.to_world)
+
+
+def _torso_centre(v: np.ndarray, segments: np.ndarray | None) -> np.ndarray:
+    if segments is None:
+        return np.zeros(3)
+    t = segments == SEGMENT_ID["torso"]
+    c = v[t].mean(axis=0)
+    return np.array([c[0], 0.0, 0.5 * (v[t, 2].min() + v[t, 2].max())])
