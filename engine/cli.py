@@ -229,7 +229,8 @@ def walk_cmd(
     front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP),
 ):
     """Dress a body (as `tryon drape`), then walk it: write anim.glb (plays in any glTF viewer),
-    strip.png (frames side by side) and report.json."""
+    strip.png (frames side by side) and report.json. BODY may also be an animation: a .zip of OBJ
+    frames (one mesh topology) played at --fps; the garment is dressed on its first frame."""
 
     def go():
         from engine.body.motion import WalkParams
@@ -241,8 +242,17 @@ def walk_cmd(
         wo = WalkOptions(seconds=seconds, fps=fps, reuse_maps=reuse_maps, velocity_mode=velocity_mode,
                          walk=WalkParams(speed=speed, stride=stride, in_place=in_place))
         wo.validate()  # refuse before dressing
-        b = _body(body, up, front)
-        if b.rig is None:  # a scan: give it the default body's skeleton and weights
+        track = None
+        if body.lower().endswith(".zip"):  # an uploaded animation: its own motion, at --fps
+            from engine.body.animation import load_animation
+
+            track = load_animation(Path(body), fps, up=up, front=front)
+            b = track.body
+            for line in track.notes:
+                typer.echo(f"note: {line}", err=True)
+        else:
+            b = _body(body, up, front)
+        if b.rig is None and track is None:  # a scan: give it the default body's skeleton and weights
             from engine.body.fit import fit_rig
 
             b = fit_rig(b)
@@ -252,7 +262,8 @@ def walk_cmd(
         with prog:
             res, report = run_tryon(b, spec, fabric=fabric, h=resolution / 100.0, texel=texel / 1000.0,
                                     options=DrapeOptions(fabric=fabric), place=place, source=name, progress=update)
-            w = walk_cloth(b, res, wo, texel=texel / 1000.0, tol=res.model.params.tolerance, progress=update)
+            w = walk_cloth(b, res, wo, texel=texel / 1000.0, tol=res.model.params.tolerance, progress=update,
+                           track=track)
         full = walk_report(report, w.report)
         for p in write_walk_outputs(out, b, w, full):
             typer.echo(str(p))

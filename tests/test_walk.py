@@ -210,3 +210,78 @@ def test_walk_cli_refuses_bad_input(tmp_path, monkeypatch, args, words):
     err = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
     assert len(err) == 1 and words in err[0], r.stderr
     assert not (tmp_path / "o" / "anim.glb").exists()
+
+
+def _anim_zip(path, frames, faces, names=None):
+    import io
+    import zipfile
+
+    with zipfile.ZipFile(path, "w") as z:
+        for k, v in enumerate(frames):
+            buf = io.StringIO()
+            buf.write("".join(f"v {x:.6f} {y:.6f} {zz:.6f}\n" for x, y, zz in v))
+            buf.write("".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces))
+            z.writestr(names[k] if names else f"frames/f_{k:03d}.obj", buf.getvalue())
+    return path
+
+
+@pytest.fixture(scope="module")
+def anim_zip(tmp_path_factory):
+    from engine.body.default import default_body
+    from engine.body.motion import WalkParams, walk_track
+
+    body = default_body("female")
+    tr = walk_track(body, WalkParams(), fps=30)
+    frames = [tr.vertices(i) for i in range(20)]
+    return _anim_zip(tmp_path_factory.mktemp("anim") / "walk.zip", frames, body.faces), frames
+
+
+def test_load_animation(anim_zip):
+    from engine.body.animation import load_animation
+
+    path, frames = anim_zip
+    t = load_animation(path, fps=30)
+    assert t.frames.shape == (20, len(frames[0]), 3) and not t.periodic
+    # the same motion (the loader only re-centres the first frame's box)
+    shift = t.frames[0].astype(np.float64) - frames[0]
+    assert np.abs(shift - shift.mean(axis=0)).max() < 1e-5
+    for k in (5, 13, 19):
+        assert np.abs((t.vertices(k) - shift) - frames[k]).max() < 1e-5
+    fd = (frames[11] - frames[9]) * 15
+    assert np.abs(t.velocities(10) - fd).max() < 1e-3
+    assert t.body.segments is not None  # the first frame (rest pose) was fitted
+
+
+def _two_topologies(p):
+    import zipfile
+
+    _anim_zip(p, [np.eye(3), np.eye(3)], np.array([[0, 1, 2]]))
+    with zipfile.ZipFile(p, "a") as z:  # a third frame with another mesh
+        z.writestr("frames/f_002.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\n")
+
+
+@pytest.mark.parametrize("make, words", [
+    (lambda p: p.write_text("not a zip"), "not a zip"),
+    (lambda p: _anim_zip(p, [np.eye(3)], np.array([[0, 1, 2]])), "at least 2"),
+    (lambda p: _two_topologies(p), "topology"),
+])
+def test_load_animation_refuses_bad_files(tmp_path, make, words):
+    from engine.body.animation import load_animation
+    from engine.errors import InputError
+
+    p = tmp_path / "a.zip"
+    make(p)
+    with pytest.raises(InputError, match=words):
+        load_animation(p, fps=30)
+
+
+def test_walk_cli_with_an_uploaded_animation(anim_zip, tmp_path):
+    path, frames = anim_zip
+    r = _walk_cli(tmp_path, "--body", path, "--garment", "skirt", "--resolution", "3", "--seconds", "2")
+    assert r.exit_code == 0, (r.output, r.stderr)
+    rep = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert rep["frames"] == 19  # clipped to the animation (20 frames = 19 steps)
+    assert rep["walk"]["map_frames_rendered"] == 20  # every frame, none kept (0 .. 19)
+    assert any("animation ends" in line for line in rep["left_out"])
+    assert rep["walk"]["penetration_mm"]["max"] <= 10.0
+    assert (tmp_path / "o" / "anim.glb").stat().st_size > 1000

@@ -110,6 +110,9 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
     renderer = MapRenderer(body.faces, segments=body.segments, segment_names=segs, texel=texel, tol=tol,
                            window=window, with_velocity=True)
     n_frames = int(round(o.seconds * track.fps))
+    if not track.periodic and n_frames > len(track.frames) - 1:
+        n_frames = len(track.frames) - 1
+        left.append(f"walking past {n_frames / track.fps:.2f} s, because the animation ends there")
     if track.periodic and o.reuse_maps:
         distinct = min(n_frames + 1, len(track.frames))
         left.append(f"maps of frames after the first cycle, because the walk is periodic: {distinct} frames "

@@ -1,0 +1,87 @@
+"""An uploaded animated body: a zip of OBJ frames (one topology) at a stated frame rate -> BodyTrack.
+
+    track = load_animation("walk.zip", fps=30)
+
+Frames are the zip's .obj entries in name order (frame_000.obj, frame_001.obj, ...). The first
+frame is loaded as a scan (engine.body.load: units, axes, repairs) and the same transform is
+applied to every frame, so the body keeps its motion through the room; vertices the repair
+dropped or merged are mapped by position in the first frame. Velocities are central
+differences of the frames. Segment labels come from fitting the default skeleton to the first
+frame (engine.body.fit) when it stands in an A-pose, else the maps are whole-body.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from engine.body.load import _read, load_body_file
+from engine.body.motion import BodyTrack
+from engine.body.types import Body
+from engine.errors import InputError
+
+MAX_FRAMES = 3000
+
+
+def load_animation(path: str | Path, fps: float, up: str | None = None, front: str | None = None) -> BodyTrack:
+    path = Path(path)
+    if not (5.0 <= fps <= 240.0):
+        raise InputError(f"frame rate {fps} is out of range (5 .. 240 frames per second)")
+    if not zipfile.is_zipfile(path):
+        raise InputError(f"{path.name} is not a zip file: an animated body is a zip of OBJ frames (one per frame, "
+                         "same vertices in the same order)")
+    with zipfile.ZipFile(path) as z, tempfile.TemporaryDirectory() as tmp:
+        names = sorted(n for n in z.namelist() if n.lower().endswith(".obj") and not n.endswith("/"))
+        if len(names) < 2:
+            raise InputError(f"{path.name} holds {len(names)} OBJ frame(s): an animation needs at least 2")
+        if len(names) > MAX_FRAMES:
+            raise InputError(f"{path.name} holds {len(names)} frames, more than {MAX_FRAMES}: shorten the animation")
+        files = []
+        for i, n in enumerate(names):
+            p = Path(tmp) / f"{i:05d}.obj"  # our own names: never a path from the zip
+            p.write_bytes(z.read(n))
+            files.append(p)
+        first = load_body_file(files[0], up=up, front=front)
+        raw0, faces0 = _read(files[0])
+        frames_raw = [raw0]
+        for n, p in zip(names[1:], files[1:]):
+            v, f = _read(p)
+            if v.shape != raw0.shape or f.shape != faces0.shape or not np.array_equal(f, faces0):
+                raise InputError(f"frame '{n}' has {len(v)} vertices / {len(f)} triangles, the first frame "
+                                 f"{len(raw0)} / {len(faces0)}: every frame needs the same mesh topology")
+            frames_raw.append(v)
+    a = first.to_world
+    world0 = raw0 @ a[:3, :3].T + a[:3, 3]
+    from scipy.spatial import cKDTree
+
+    dist, index = cKDTree(world0).query(first.vertices)
+    if dist.max() > 1e-6:
+        raise InputError(f"{path.name}: the first frame could not be matched to its repaired mesh")
+    frames = np.empty((len(frames_raw), len(first.vertices), 3), np.float32)
+    for k, v in enumerate(frames_raw):
+        w = v[index] @ a[:3, :3].T + a[:3, 3]
+        if not np.all(np.isfinite(w)):
+            raise InputError(f"frame '{names[k]}' has non-finite vertex positions")
+        frames[k] = w
+    step = np.diff(frames, axis=0).astype(np.float64) * fps
+    vel = np.empty_like(frames)
+    vel[0], vel[-1] = step[0], step[-1]
+    vel[1:-1] = 0.5 * (step[1:] + step[:-1])
+    speed = np.linalg.norm(vel, axis=2).max()
+    if speed > 20.0:
+        raise InputError(f"{path.name}: a body point moves at {speed:.0f} m/s between frames: is --fps right, or are "
+                         "frames out of order?")
+    body = Body(vertices=frames[0].astype(np.float64), faces=first.faces, name=path.stem, notes=list(first.notes),
+                to_world=first.to_world)
+    notes = [f"animation: {len(frames)} frames at {fps:g} fps ({(len(frames) - 1) / fps:.2f} s) from {path.name}"]
+    try:
+        from engine.body.fit import fit_rig
+
+        body.segments = fit_rig(body).segments
+    except InputError as e:
+        notes.append(f"segment maps, because the first frame could not be segmented ({e})")
+    return BodyTrack(body=body, fps=float(fps), frames=frames, vel=vel, offsets=np.zeros((len(frames), 3)),
+                     cycle_start=0, cycle_frames=0, shift=np.zeros(3), notes=notes)
