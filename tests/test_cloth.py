@@ -226,12 +226,13 @@ def _two_points(stretch=1.2, v=((-1.0, 0.3, 0.0), (1.0, -0.2, 0.5))):
     return x, np.array(v, dtype=np.float64)
 
 
-def _vm(x, v, mode, threshold=0.1, recover=1e12, active=True):
+def _vm(x, v, mode, threshold=0.1, recover=1e12, active=True, body_v=None):
     springs = np.array([[0, 1]], dtype=np.int32)
     rest = np.array([1.0])
     work = np.zeros(1, dtype=np.int32)
+    body_v = np.zeros((2, 3)) if body_v is None else np.asarray(body_v, np.float64)
     return K.modify_velocities(x, v, springs, rest, np.array([active]), threshold, K.VM_MODES[mode],
-                               np.array([0.0, -9.81, 0.0]), 1e-4, np.zeros((2, 3)), 4, work, recover)
+                               np.array([0.0, -9.81, 0.0]), 1e-4, body_v, 4, work, recover)
 
 
 @pytest.mark.parametrize("recover", [1e12, ClothParams().recover])
@@ -278,13 +279,37 @@ def test_vm_leaves_unstretched_or_closing_or_inactive_springs_alone(mode):
 
 
 def test_directional_mode_rear_point_catches_up():
-    # a vertical spring falling: v_dir = g dt points down; b is below a (ahead along v_dir)
-    x = np.array([[0.0, 0.0, 0.0], [0.0, -1.2, 0.0]])
-    v = np.array([[0.0, -1.0, 0.0], [0.0, -3.0, 0.0]])  # b falls faster: stretching
-    _vm(x, v, "directional")
+    # both ends dragged by a body moving +z; the spring lies along z, b ahead along v_dir
+    x = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.2]])
+    v = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 3.0]])  # b runs ahead: stretching
+    _vm(x, v, "directional", body_v=[[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
     # the rear point (a) takes the front point's speed; the front is unchanged
-    np.testing.assert_allclose(v[1], [0.0, -3.0, 0.0])
-    np.testing.assert_allclose(v[0], [0.0, -3.0, 0.0])
+    np.testing.assert_allclose(v[1], [0.0, 0.0, 3.0])
+    np.testing.assert_allclose(v[0], [0.0, 0.0, 3.0])
+
+
+def test_directional_mode_free_spring_averages():
+    # a falling vertical spring, no body: v_dir = g dt; the catch-up rule would hand the lower
+    # end's speed up the chain (engine.cloth.kernels.DIR_MIN_OBJECT_SPEED): eq. 5 instead
+    x = np.array([[0.0, 0.0, 0.0], [0.0, -1.2, 0.0]])
+    v = np.array([[0.0, -1.0, 0.0], [0.0, -3.0, 0.0]])
+    _vm(x, v, "directional")
+    np.testing.assert_allclose(v, [[0.0, -2.0, 0.0], [0.0, -2.0, 0.0]])
+
+
+@pytest.mark.parametrize("dragged", [0, 1])
+def test_directional_mode_free_end_follows_the_dragged_one(dragged):
+    # one end held by a body moving +z at 1 m/s, the other free and lagging: whichever is the
+    # rear along v_dir, the free end takes the dragged end's speed along the spring
+    x = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.2]])
+    v = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    free = 1 - dragged
+    v[free, 2] = 3.0 if free == 1 else -1.0  # moving away from the dragged end
+    body_v = np.zeros((2, 3))
+    body_v[dragged, 2] = 1.0
+    _vm(x, v, "directional", body_v=body_v)
+    np.testing.assert_allclose(v[dragged], [0.0, 0.0, 1.0])
+    np.testing.assert_allclose(v[free], [0.0, 0.0, 1.0])
 
 
 # --- welds ---------------------------------------------------------------------------------------------

@@ -285,3 +285,32 @@ def test_walk_cli_with_an_uploaded_animation(anim_zip, tmp_path):
     assert any("animation ends" in line for line in rep["left_out"])
     assert rep["walk"]["penetration_mm"]["max"] <= 10.0
     assert (tmp_path / "o" / "anim.glb").stat().st_size > 1000
+
+
+@pytest.mark.parametrize("args", [["--speed", "2.4"], ["--speed", "3.6"], ["--fabric", "denim"], ["--fabric", "silk"]])
+def test_walk_stability(tmp_path, args):
+    """Twice and three times the walking speed, a stiff and a very light fabric (all at the eq. 4
+    time step): the run ends either with a sane result or with a clear error -- never NaN,
+    never an exploded garment written as a result."""
+    r = _walk_cli(tmp_path, "--body", "default:female", "--garment", "skirt", "--resolution", "3",
+                  "--seconds", "1.2", *args)
+    if r.exit_code == 0:
+        rep = json.loads((tmp_path / "o" / "report.json").read_text())
+        assert rep["walk"]["strain_max"] < 0.25, rep["walk"]["strain_max"]
+        assert rep["walk"]["penetration_mm"]["max"] < 20.0 and rep["walk"]["penetration_mm"]["p99"] <= 2.0
+        assert all(np.isfinite(f["strain_max"]) for f in rep["per_frame"])
+    else:
+        assert r.exit_code == 2, (r.exit_code, r.output)
+        err = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
+        assert len(err) == 1 and "internal" not in err[0], r.stderr
+        assert not (tmp_path / "o" / "anim.glb").exists()
+
+
+def test_walk_refuses_a_garment_far_too_small(tmp_path):
+    """XS on a heavy body: the seams close, but the skirt would be stretched ~50 % (measured
+    before the check existed): refused before walking, nothing written."""
+    r = _walk_cli(tmp_path, "--body", "default:female,weight=1.0", "--garment", "skirt", "--size", "XS",
+                  "--resolution", "3", "--seconds", "1")
+    assert r.exit_code == 2, (r.exit_code, r.output)
+    assert "too small" in r.stderr and "larger size" in r.stderr
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())

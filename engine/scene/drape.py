@@ -8,7 +8,8 @@ Stages end on measured conditions within a bounded budget of simulated time:
   point); when every pair is welded the sewn vertices are merged. If the budget runs out first,
   SimulationError names the seams that stayed open and their gaps.
 - drape: gravity on until the cloth's shape stops moving: RMS vertex displacement over
-  `settle_time`, as a speed, below `settle_speed` twice in a row.
+  `settle_time`, as a speed, below `settle_speed` twice in a row. A garment left stretched more
+  than `too_tight` past the fabric's strain threshold is refused as too small (SimulationError).
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ class DrapeOptions:
     drape_budget: float = 4.0  # s of simulated time
     drape_min: float = 0.5  # s: drape at least this long after sewing
     settle_speed: float = 0.005  # m/s: RMS drift of the vertices over a window ...
+    too_tight: float = 0.10  # a drape whose strain exceeds the fabric's threshold by this is refused
     settle_time: float = 0.25  # s: ... of this length, twice in a row (a window long against
     # the cloth's vibration, whose amplitude A alone reads as 2 A / window: at 0.1 s a quarter
     # millimetre of it kept dresses and shirts "moving" for the whole budget)
@@ -167,6 +169,13 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
                 break
     iters["draping"] = solver.iterations
     timing["draping"] = time.perf_counter() - t0
+    strain = solver.max_strain(state)
+    if strain > fabric.strain_threshold + o.too_tight:
+        err = SimulationError(f"the garment is too small for this body: after draping it is stretched "
+                              f"{100 * strain:.0f} % where {fabric.name} allows {100 * fabric.strain_threshold:.0f} %; "
+                              "try a larger size")
+        err.positions, err.triangles = state.x.copy(), _triangles(model)
+        raise err
     for k in cloth_t:
         cloth_t[k] += solver.timing[k]
     return DrapeResult(positions=state.x.copy(), triangles=_triangles(model), model=model, state=state,
