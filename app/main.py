@@ -1,0 +1,331 @@
+"""The try-on service: REST API (bodies, garments, try-ons, results) and the browser page.
+
+    uvicorn --factory app.main:create_app      # settings from TRYON_* (app/settings.py)
+
+Every body, garment and try-on belongs to the API token that created it (header
+`Authorization: Bearer <token>`; `?token=` also works for downloads and the page); any other
+token gets 404 for it. Errors are JSON: {"error": "what is wrong and how to fix it"}.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import secrets
+import shutil
+import time
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Literal
+
+from fastapi import Depends, FastAPI, File, Header, HTTPException, Query, Request, UploadFile
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, JSONResponse, RedirectResponse
+from fastapi.staticfiles import StaticFiles
+from pydantic import BaseModel, Field
+
+from app.db import ACTIVE, DB, new_id
+from app.jobs import JobManager
+from app.settings import Settings
+from app.worker import job_dir
+
+WEB = Path(__file__).resolve().parents[1] / "web"
+BODY_EXT = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+RESULT_FILES = ("scene.glb", "garment.obj", "front.png", "side.png", "back.png", "report.json", "anim.glb",
+                "strip.png")
+
+
+class DefaultBodyIn(BaseModel):
+    preset: Literal["female", "male"] = "female"
+    height: float | None = Field(None, description="metres, 1.40 .. 2.10")
+    weight: float | None = Field(None, description="0 thin .. 0.5 average .. 1 heavy")
+    muscle: float | None = None
+    proportions: float | None = None
+    gender: float | None = None
+    age: float | None = None
+
+
+class TryOnIn(BaseModel):
+    body_id: str | None = Field(None, description="a body you created; or give `body`")
+    body: str | None = Field(None, description="a default body spec, e.g. default:female,height=1.7")
+    garment: str = Field(..., description="a catalogue name (GET /api/garments) or the id of your pattern")
+    size: str | None = Field(None, description="catalogue size XS..XXL (default M); not for patterns")
+    fabric: str = "cotton"
+    motion: Literal["none", "walk"] = "none"
+    seconds: float = Field(4.0, description="walking time (motion=walk)")
+    resolution_cm: float = Field(1.5, description="cloth edge length, 0.75 .. 4 cm")
+
+
+def create_app(settings: Settings | None = None, start_workers: bool = True) -> FastAPI:
+    s = settings or Settings.from_env()
+    s.data_dir.mkdir(parents=True, exist_ok=True)
+    db = DB(s.db)
+    manager = JobManager(s, db)
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        if start_workers:
+            manager.start()
+        yield
+        manager.stop()
+
+    app = FastAPI(title="tryon", description="Virtual try-on: dress a body in a garment, walk it.",
+                  lifespan=lifespan)
+    app.state.settings, app.state.db, app.state.jobs = s, db, manager
+
+    @app.exception_handler(HTTPException)
+    async def http_error(request: Request, exc: HTTPException):
+        return JSONResponse({"error": exc.detail}, status_code=exc.status_code, headers=exc.headers)
+
+    @app.exception_handler(RequestValidationError)
+    async def validation_error(request: Request, exc: RequestValidationError):
+        parts = []
+        for e in exc.errors():
+            where = ".".join(str(x) for x in e.get("loc", ()) if x != "body")
+            parts.append(f"{where}: {e.get('msg')}" if where else str(e.get("msg")))
+        return JSONResponse({"error": "; ".join(parts)}, status_code=422)
+
+    # --- access -------------------------------------------------------------------------
+    def owner(authorization: str | None = Header(None), token: str | None = Query(None)) -> str:
+        t = None
+        if authorization and authorization.lower().startswith("bearer "):
+            t = authorization[7:].strip()
+        t = t or token
+        if not t:
+            raise HTTPException(401, "no API token: send 'Authorization: Bearer <token>' (POST /api/tokens gives one)")
+        if t not in s.tokens and db.one("SELECT token FROM tokens WHERE token=?", t) is None:
+            raise HTTPException(401, "unknown API token: create one with POST /api/tokens")
+        return t
+
+    @app.post("/api/tokens", status_code=201)
+    def create_token():
+        t = secrets.token_urlsafe(24)
+        db.run("INSERT INTO tokens (token, created) VALUES (?, ?)", t, time.time())
+        return {"token": t}
+
+    def owned(table: str, rid: str, who: str) -> dict:
+        row = db.one(f"SELECT * FROM {table} WHERE id=? AND owner=?", rid, who)
+        if row is None:
+            raise HTTPException(404, f"no {table[:-1] if table != 'bodies' else 'body'} '{rid}' for this token")
+        return row
+
+    async def save_upload(f: UploadFile, dest: Path) -> None:
+        cap = s.max_upload_bytes
+        n = 0
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        with open(dest, "wb") as out:
+            while chunk := await f.read(1 << 20):
+                n += len(chunk)
+                if n > cap:
+                    out.close()
+                    dest.unlink(missing_ok=True)
+                    raise HTTPException(413, f"upload larger than {cap / 2 ** 20:.0f} MB: decimate the mesh "
+                                             "or raise TRYON_MAX_UPLOAD_MB")
+                out.write(chunk)
+        if n == 0:
+            dest.unlink(missing_ok=True)
+            raise HTTPException(400, "the uploaded file is empty")
+
+    # --- bodies -------------------------------------------------------------------------
+    def body_out(row: dict) -> dict:
+        return {"id": row["id"], "kind": row["kind"], "name": row["name"], "info": json.loads(row["info"] or "{}")}
+
+    @app.post("/api/bodies", status_code=201)
+    async def upload_body(file: UploadFile = File(...), who: str = Depends(owner)):
+        from engine.errors import TryonError
+
+        ext = Path(file.filename or "").suffix.lower()
+        if ext not in BODY_EXT:
+            raise HTTPException(400, f"body file type '{ext or 'none'}' is not supported: give one of {' '.join(BODY_EXT)}")
+        bid = new_id()
+        dest = s.data_dir / "uploads" / f"body-{bid}{ext}"  # our name, never the client's
+        await save_upload(file, dest)
+        try:
+            from engine.body.load import load_body_file
+
+            b = load_body_file(dest)
+        except TryonError as e:
+            dest.unlink(missing_ok=True)
+            raise HTTPException(400, str(e).replace(dest.name, file.filename or dest.name)) from None
+        info = {"height_m": round(b.height, 4), "vertices": int(len(b.vertices)), "notes": b.notes}
+        name = Path(file.filename or "scan").stem[:80]
+        db.run("INSERT INTO bodies VALUES (?,?,?,?,?,?,?)", bid, who, "upload", str(dest), name, time.time(),
+               json.dumps(info))
+        return body_out(db.one("SELECT * FROM bodies WHERE id=?", bid))
+
+    @app.post("/api/bodies/default", status_code=201)
+    def default_body_create(spec: DefaultBodyIn, who: str = Depends(owner)):
+        from engine.body.default import _check_value
+        from engine.errors import InputError
+
+        params = {k: v for k, v in spec.model_dump().items() if k != "preset" and v is not None}
+        try:
+            for k, v in params.items():
+                _check_value(k, v)
+        except InputError as e:
+            raise HTTPException(422, str(e)) from None
+        text = "default:" + ",".join([spec.preset] + [f"{k}={v:g}" for k, v in params.items()])
+        bid = new_id()
+        db.run("INSERT INTO bodies VALUES (?,?,?,?,?,?,?)", bid, who, "default", text, text, time.time(),
+               json.dumps({"spec": text}))
+        return body_out(db.one("SELECT * FROM bodies WHERE id=?", bid))
+
+    @app.get("/api/bodies")
+    def list_bodies(who: str = Depends(owner)):
+        return [body_out(r) for r in db.all("SELECT * FROM bodies WHERE owner=? ORDER BY created", who)]
+
+    @app.get("/api/bodies/{bid}")
+    def get_body(bid: str, who: str = Depends(owner)):
+        return body_out(owned("bodies", bid, who))
+
+    @app.delete("/api/bodies/{bid}", status_code=204)
+    def delete_body(bid: str, who: str = Depends(owner)):
+        row = owned("bodies", bid, who)
+        if row["kind"] == "upload":
+            Path(row["spec"]).unlink(missing_ok=True)
+        db.run("DELETE FROM bodies WHERE id=?", bid)
+
+    # --- garments -----------------------------------------------------------------------
+    @app.get("/api/garments")
+    def garments(who: str = Depends(owner)):
+        from engine.cloth.fabrics import FABRICS
+        from engine.pattern.catalogue import CATALOGUE, SIZES
+
+        return {"catalogue": [{"name": n, "description": d} for n, (_, d) in CATALOGUE.items()],
+                "sizes": list(SIZES), "fabrics": list(FABRICS),
+                "uploaded": [garment_out(r) for r in db.all("SELECT * FROM garments WHERE owner=? ORDER BY created", who)]}
+
+    def garment_out(row: dict) -> dict:
+        return {"id": row["id"], "name": row["name"], "info": json.loads(row["info"] or "{}")}
+
+    @app.post("/api/garments", status_code=201)
+    async def upload_garment(file: UploadFile = File(...), who: str = Depends(owner)):
+        from engine.errors import TryonError
+        from engine.pattern.io import parse_pattern
+        from engine.pattern.validate import check
+
+        if Path(file.filename or "").suffix.lower() != ".json":
+            raise HTTPException(400, "a pattern is a GarmentCode JSON specification (.json)")
+        gid = new_id()
+        dest = s.data_dir / "uploads" / f"pattern-{gid}.json"
+        await save_upload(file, dest)
+        try:
+            spec = parse_pattern(dest.read_bytes(), source=file.filename or "pattern")
+            warnings = [str(p) for p in check(spec, source=file.filename or "pattern")]
+        except TryonError as e:
+            dest.unlink(missing_ok=True)
+            raise HTTPException(400, str(e)) from None
+        name = Path(file.filename or "pattern").stem[:80]
+        info = {"panels": len(spec.pattern.panels), "warnings": warnings}
+        db.run("INSERT INTO garments VALUES (?,?,?,?,?,?)", gid, who, str(dest), name, time.time(), json.dumps(info))
+        return garment_out(db.one("SELECT * FROM garments WHERE id=?", gid))
+
+    @app.get("/api/garments/{gid}")
+    def get_garment(gid: str, who: str = Depends(owner)):
+        return garment_out(owned("garments", gid, who))
+
+    @app.delete("/api/garments/{gid}", status_code=204)
+    def delete_garment(gid: str, who: str = Depends(owner)):
+        row = owned("garments", gid, who)
+        Path(row["file"]).unlink(missing_ok=True)
+        db.run("DELETE FROM garments WHERE id=?", gid)
+
+    # --- try-ons ------------------------------------------------------------------------
+    def job_out(row: dict) -> dict:
+        out = {k: row[k] for k in ("id", "status", "progress", "stage", "message", "error", "attempts")}
+        out["request"] = json.loads(row["request"])
+        if row["status"] == "done":
+            out["report"] = json.loads(row["report"] or "{}")
+            d = job_dir(s.data_dir, row["id"])
+            out["files"] = {n: f"/api/tryons/{row['id']}/files/{n}" for n in RESULT_FILES if (d / n).exists()}
+        return out
+
+    @app.post("/api/tryons", status_code=202)
+    def create_tryon(req: TryOnIn, who: str = Depends(owner)):
+        from engine.cloth.fabrics import FABRICS
+        from engine.pattern.catalogue import CATALOGUE, SIZES
+
+        if (req.body_id is None) == (req.body is None):
+            raise HTTPException(422, "give either body_id (a body you created) or body (e.g. default:female)")
+        if req.body_id is not None:
+            row = owned("bodies", req.body_id, who)
+            body = {"spec": row["spec"]} if row["kind"] == "default" else {"file": row["spec"]}
+        else:
+            if not req.body.startswith("default:"):
+                raise HTTPException(422, "body: only default bodies by name (default:female, default:male); "
+                                         "upload a scan with POST /api/bodies and give its body_id")
+            body = {"spec": req.body}
+        if req.garment in CATALOGUE:
+            garment = {"name": req.garment}
+            if req.size is not None and req.size.upper() not in SIZES:
+                raise HTTPException(422, f"size '{req.size}': choose one of {', '.join(SIZES)}")
+        else:
+            g = db.one("SELECT * FROM garments WHERE id=? AND owner=?", req.garment, who)
+            if g is None:
+                raise HTTPException(404, f"garment '{req.garment}' is neither in the catalogue "
+                                         f"({', '.join(CATALOGUE)}) nor one of your patterns")
+            if req.size is not None:
+                raise HTTPException(422, "size applies to catalogue garments; a pattern has its own size")
+            garment = {"file": g["file"], "label": g["name"]}
+        if req.fabric not in FABRICS:
+            raise HTTPException(422, f"fabric '{req.fabric}': choose one of {', '.join(FABRICS)}")
+        if not (0.75 <= req.resolution_cm <= 4.0):
+            raise HTTPException(422, "resolution_cm: use 0.75 .. 4 cm")
+        if not (0.1 <= req.seconds <= 20.0) or not math.isfinite(req.seconds):
+            raise HTTPException(422, "seconds: walk 0.1 .. 20 s")
+        request = {"body": body, "garment": garment, "size": req.size.upper() if req.size else None,
+                   "fabric": req.fabric, "motion": req.motion, "seconds": req.seconds,
+                   "resolution_cm": req.resolution_cm}
+        jid = db.enqueue(who, request, s.queue_max)
+        if jid is None:
+            wait = 30 * max(1, s.queue_max // s.workers)
+            raise HTTPException(429, f"the queue is full ({s.queue_max} try-ons waiting): try again later",
+                                headers={"Retry-After": str(wait)})
+        return job_out(db.one("SELECT * FROM jobs WHERE id=?", jid))
+
+    @app.get("/api/tryons")
+    def list_tryons(who: str = Depends(owner)):
+        return [job_out(r) for r in db.all("SELECT * FROM jobs WHERE owner=? ORDER BY created", who)]
+
+    @app.get("/api/tryons/{jid}")
+    def get_tryon(jid: str, who: str = Depends(owner)):
+        return job_out(owned("jobs", jid, who))
+
+    @app.post("/api/tryons/{jid}/cancel", status_code=202)
+    def cancel_tryon(jid: str, who: str = Depends(owner)):
+        row = owned("jobs", jid, who)
+        if row["status"] not in ACTIVE:
+            raise HTTPException(409, f"try-on '{jid}' is already {row['status']}")
+        db.run("UPDATE jobs SET cancel=1 WHERE id=?", jid)
+        db.run("UPDATE jobs SET status='cancelled', finished=?, error='cancelled on request' "
+               "WHERE id=? AND status='queued'", time.time(), jid)
+        return job_out(db.one("SELECT * FROM jobs WHERE id=?", jid))
+
+    @app.delete("/api/tryons/{jid}", status_code=204)
+    def delete_tryon(jid: str, who: str = Depends(owner)):
+        owned("jobs", jid, who)
+        db.run("UPDATE jobs SET cancel=1 WHERE id=?", jid)  # a running worker stops and cleans up
+        db.run("DELETE FROM jobs WHERE id=?", jid)
+        shutil.rmtree(job_dir(s.data_dir, jid), ignore_errors=True)
+
+    @app.get("/api/tryons/{jid}/files/{name}")
+    def result_file(jid: str, name: str, who: str = Depends(owner)):
+        owned("jobs", jid, who)
+        if name not in RESULT_FILES:
+            raise HTTPException(404, f"no result '{name}': results are {', '.join(RESULT_FILES)}")
+        p = job_dir(s.data_dir, jid) / name
+        if not p.is_file():
+            raise HTTPException(404, f"'{name}' is not there (yet): the try-on is not done, or did not make it")
+        return FileResponse(p)
+
+    # --- the page -----------------------------------------------------------------------
+    @app.get("/", include_in_schema=False)
+    def index():
+        return RedirectResponse("/web/index.html")
+
+    if WEB.is_dir():
+        app.mount("/web", StaticFiles(directory=WEB), name="web")
+    return app
+
+
+

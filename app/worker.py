@@ -1,0 +1,111 @@
+"""A worker process: takes queued try-ons from the database, runs them with the engine, writes
+their results and status. Started with multiprocessing's spawn (never fork after a GL context).
+
+A try-on's request (JSON, resolved by the API): body {"spec": "default:female,..."} or
+{"file": path}; garment {"name": catalogue name} or {"file": pattern path}; size, fabric,
+motion ("none" or "walk"), seconds, resolution_cm. Results go to DATA/jobs/<id>/.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+import traceback
+from pathlib import Path
+
+from app.db import DB
+
+
+class Cancelled(Exception):
+    pass
+
+
+def job_dir(data_dir: Path, jid: str) -> Path:
+    return Path(data_dir) / "jobs" / jid
+
+
+def worker_main(db_path: str, data_dir: str, poll: float = 0.2) -> None:
+    db = DB(Path(db_path))
+    pid = os.getpid()
+    while True:
+        job = db.claim(pid)
+        if job is None:
+            time.sleep(poll)
+            continue
+        run_job(db, job, Path(data_dir))
+
+
+def run_job(db: DB, job: dict, data_dir: Path) -> None:
+    from engine.errors import TryonError
+
+    jid = job["id"]
+    out = job_dir(data_dir, jid)
+    last = [0.0]
+
+    def progress(stage: str, fraction: float, message: str) -> None:
+        now = time.monotonic()
+        if now - last[0] < 0.3:
+            return
+        last[0] = now
+        row = db.one("SELECT cancel FROM jobs WHERE id=?", jid)
+        if row is None or row["cancel"]:
+            raise Cancelled()
+        db.run("UPDATE jobs SET stage=?, progress=?, message=? WHERE id=?", stage, float(fraction), message, jid)
+
+    try:
+        report = _run(json.loads(job["request"]), out, progress)
+    except Cancelled:
+        shutil.rmtree(out, ignore_errors=True)
+        db.finish(jid, "cancelled", "cancelled on request")
+        return
+    except TryonError as e:
+        shutil.rmtree(out, ignore_errors=True)
+        db.finish(jid, "failed", str(e))
+        return
+    except Exception as e:  # a bug: the job fails with the reason, the worker goes on
+        shutil.rmtree(out, ignore_errors=True)
+        db.finish(jid, "failed", f"internal error ({type(e).__name__}: {e})")
+        traceback.print_exc()
+        return
+    if db.one("SELECT id FROM jobs WHERE id=?", jid) is None:  # deleted while it ran
+        shutil.rmtree(out, ignore_errors=True)
+        return
+    db.run("UPDATE jobs SET progress=1, stage='done', message='' WHERE id=?", jid)
+    db.finish(jid, "done", None, report)
+
+
+def _run(req: dict, out: Path, progress) -> dict:
+    from engine.body import resolve_body
+    from engine.scene.drape import DrapeOptions
+    from engine.scene.garments import resolve_garment
+    from engine.scene.tryon import run_tryon, write_outputs
+
+    progress("body", 0.0, "loading the body")
+    b = req["body"]
+    body = resolve_body(b["spec"] if "spec" in b else b["file"])
+    g = req["garment"]
+    if "name" in g:
+        spec, place, name = resolve_garment(g["name"], body, req.get("size") or "M")
+    else:
+        spec, place, name = resolve_garment(g["file"], body, None)
+        name = g.get("label", name)
+    fabric = req.get("fabric", "cotton")
+    walking = req.get("motion", "none") == "walk"
+    if walking and body.rig is None:
+        from engine.body.fit import fit_rig
+
+        body = fit_rig(body)
+    res, report = run_tryon(body, spec, fabric=fabric, h=req.get("resolution_cm", 1.5) / 100.0,
+                            options=DrapeOptions(fabric=fabric), place=place, source=name, progress=progress)
+    out.mkdir(parents=True, exist_ok=True)
+    write_outputs(out, body, res, report, size=500)
+    if walking:
+        from engine.scene.walk import WalkOptions, walk_cloth, walk_report, write_walk_outputs
+
+        w = walk_cloth(body, res, WalkOptions(seconds=req.get("seconds", 4.0)), texel=0.005,
+                       tol=res.model.params.tolerance, progress=progress)
+        report = walk_report(report, w.report)
+        write_walk_outputs(out, body, w, report)
+    return report

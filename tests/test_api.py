@@ -1,0 +1,197 @@
+"""The REST API (httpx through FastAPI's TestClient, a real SQLite file, real spawned workers)."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from fastapi.testclient import TestClient
+
+from app.main import create_app
+from app.settings import Settings
+from tests.samples import SAMPLE_BODY, SAMPLE_SKIRT
+
+
+def _settings(tmp_path, **kw):
+    return Settings(data_dir=tmp_path / "data", **kw)
+
+
+@pytest.fixture()
+def idle(tmp_path):
+    """An app whose workers are not started: jobs stay queued (API-only tests)."""
+    with TestClient(create_app(_settings(tmp_path, queue_max=3), start_workers=False)) as c:
+        yield c
+
+
+def token(c) -> dict:
+    r = c.post("/api/tokens")
+    assert r.status_code == 201
+    return {"Authorization": f"Bearer {r.json()['token']}"}
+
+
+def wait(c, h, jid, states=("done", "failed", "cancelled"), timeout=240):
+    t0 = time.time()
+    while time.time() - t0 < timeout:
+        j = c.get(f"/api/tryons/{jid}", headers=h).json()
+        if j["status"] in states:
+            return j
+        time.sleep(0.5)
+    raise AssertionError(f"job {jid} still {j['status']} after {timeout} s: {j}")
+
+
+def test_token_required(idle):
+    r = idle.get("/api/bodies")
+    assert r.status_code == 401 and "token" in r.json()["error"]
+    r = idle.get("/api/bodies", headers={"Authorization": "Bearer nope"})
+    assert r.status_code == 401
+
+
+def test_default_body_and_errors(idle):
+    h = token(idle)
+    r = idle.post("/api/bodies/default", json={"preset": "female", "height": 1.72}, headers=h)
+    assert r.status_code == 201 and r.json()["info"]["spec"] == "default:female,height=1.72"
+    bid = r.json()["id"]
+    assert idle.get(f"/api/bodies/{bid}", headers=h).status_code == 200
+    r = idle.post("/api/bodies/default", json={"preset": "female", "height": 172}, headers=h)
+    assert r.status_code == 422 and "centimetres" in r.json()["error"]
+    r = idle.post("/api/bodies/default", json={"preset": "child"}, headers=h)
+    assert r.status_code == 422 and "preset" in r.json()["error"]
+    assert idle.delete(f"/api/bodies/{bid}", headers=h).status_code == 204
+    assert idle.get(f"/api/bodies/{bid}", headers=h).status_code == 404
+
+
+def test_upload_body_and_pattern(idle):
+    h = token(idle)
+    with open(SAMPLE_BODY, "rb") as f:
+        r = idle.post("/api/bodies", files={"file": ("../../etc/passwd.obj", f)}, headers=h)
+    assert r.status_code == 201, r.text
+    b = r.json()
+    assert 1.6 < b["info"]["height_m"] < 1.7
+    stored = list((idle.app.state.settings.data_dir / "uploads").iterdir())
+    assert [p.name for p in stored] == [f"body-{b['id']}.obj"]  # our name, not the client's path
+    r = idle.post("/api/bodies", files={"file": ("x.obj", b"v 0 0 0\nnot a mesh")}, headers=h)
+    assert r.status_code == 400 and "x.obj" in r.json()["error"]
+    r = idle.post("/api/bodies", files={"file": ("x.exe", b"MZ")}, headers=h)
+    assert r.status_code == 400 and ".obj" in r.json()["error"]
+    with open(SAMPLE_SKIRT, "rb") as f:
+        r = idle.post("/api/garments", files={"file": ("skirt.json", f)}, headers=h)
+    assert r.status_code == 201 and r.json()["info"]["panels"] >= 2
+    r = idle.post("/api/garments", files={"file": ("bad.json", b"{nope")}, headers=h)
+    assert r.status_code == 400 and "JSON" in r.json()["error"]
+    g = idle.get("/api/garments", headers=h).json()
+    assert "dress" in [x["name"] for x in g["catalogue"]] and "M" in g["sizes"] and "silk" in g["fabrics"]
+    assert len(g["uploaded"]) == 1
+
+
+def test_upload_size_cap(tmp_path):
+    with TestClient(create_app(_settings(tmp_path, max_upload_bytes=1000), start_workers=False)) as c:
+        h = token(c)
+        r = c.post("/api/bodies", files={"file": ("big.obj", b"v 0 0 0\n" * 500)}, headers=h)
+        assert r.status_code == 413 and "MB" in r.json()["error"]
+        assert not any((c.app.state.settings.data_dir / "uploads").iterdir())
+
+
+def test_cross_token_access_is_404(idle):
+    a, b = token(idle), token(idle)
+    bid = idle.post("/api/bodies/default", json={"preset": "male"}, headers=a).json()["id"]
+    jid = idle.post("/api/tryons", json={"body_id": bid, "garment": "skirt"}, headers=a).json()["id"]
+    for url in (f"/api/bodies/{bid}", f"/api/tryons/{jid}", f"/api/tryons/{jid}/files/front.png"):
+        assert idle.get(url, headers=b).status_code == 404, url
+    assert idle.delete(f"/api/bodies/{bid}", headers=b).status_code == 404
+    assert idle.post(f"/api/tryons/{jid}/cancel", headers=b).status_code == 404
+    r = idle.post("/api/tryons", json={"body_id": bid, "garment": "skirt"}, headers=b)
+    assert r.status_code == 404  # b cannot use a's body
+    assert idle.get("/api/tryons", headers=b).json() == []
+
+
+def test_tryon_validation(idle):
+    h = token(idle)
+    for body, words in [({"body": "default:female", "garment": "ballgown"}, "catalogue"),
+                        ({"body": "default:female", "garment": "skirt", "size": "XXXL"}, "size"),
+                        ({"body": "default:female", "garment": "skirt", "fabric": "tweed"}, "fabric"),
+                        ({"garment": "skirt"}, "body"),
+                        ({"body": "default:female", "garment": "skirt", "resolution_cm": 0.1}, "resolution"),
+                        ({"body": "default:female", "garment": "skirt", "motion": "dance"}, "motion")]:
+        r = idle.post("/api/tryons", json=body, headers=h)
+        assert r.status_code in (404, 422), (body, r.status_code)
+        assert words in r.json()["error"], (body, r.json())
+
+
+def test_queue_full_is_429(idle):
+    h = token(idle)
+    for _ in range(3):
+        assert idle.post("/api/tryons", json={"body": "default:female", "garment": "skirt"}, headers=h).status_code == 202
+    r = idle.post("/api/tryons", json={"body": "default:female", "garment": "skirt"}, headers=h)
+    assert r.status_code == 429 and int(r.headers["Retry-After"]) > 0
+
+
+def test_cancel_and_delete_queued(idle):
+    h = token(idle)
+    jid = idle.post("/api/tryons", json={"body": "default:female", "garment": "skirt"}, headers=h).json()["id"]
+    r = idle.post(f"/api/tryons/{jid}/cancel", headers=h)
+    assert r.status_code == 202 and r.json()["status"] == "cancelled"
+    assert idle.post(f"/api/tryons/{jid}/cancel", headers=h).status_code == 409
+    assert idle.delete(f"/api/tryons/{jid}", headers=h).status_code == 204
+    assert idle.get(f"/api/tryons/{jid}", headers=h).status_code == 404
+
+
+def test_tryon_runs_to_the_end(tmp_path):
+    """A real worker process dresses the default woman in a coarse skirt; the results download."""
+    with TestClient(create_app(_settings(tmp_path))) as c:
+        h = token(c)
+        r = c.post("/api/tryons", json={"body": "default:female", "garment": "skirt", "resolution_cm": 3},
+                   headers=h)
+        assert r.status_code == 202
+        j = wait(c, h, r.json()["id"])
+        assert j["status"] == "done", j
+        assert j["report"]["cloth_vertices"] > 500 and j["report"]["penetration_mm"]["max"] <= 3.0
+        png = c.get(j["files"]["front.png"], headers=h)
+        assert png.status_code == 200 and png.content[:8] == b"\x89PNG\r\n\x1a\n"
+        glb = c.get(j["files"]["scene.glb"], headers=h)
+        assert glb.content[:4] == b"glTF"
+        assert c.get(f"/api/tryons/{j['id']}/files/..%2Fjobs.sqlite", headers=h).status_code == 404
+
+
+def test_failed_tryon_reports_the_reason(tmp_path):
+    with TestClient(create_app(_settings(tmp_path))) as c:
+        h = token(c)
+        r = c.post("/api/tryons", json={"body": "default:female,weight=1.0", "garment": "skirt", "size": "XS",
+                                        "resolution_cm": 3}, headers=h)
+        j = wait(c, h, r.json()["id"])
+        assert j["status"] == "failed" and "too small" in j["error"], j
+        assert "files" not in j
+
+
+def test_worker_crash_fails_only_its_job(tmp_path):
+    import os
+    import signal
+
+    with TestClient(create_app(_settings(tmp_path))) as c:
+        h = token(c)
+        first = c.post("/api/tryons", json={"body": "default:female", "garment": "skirt", "resolution_cm": 3},
+                       headers=h).json()["id"]
+        second = c.post("/api/tryons", json={"body": "default:female", "garment": "skirt", "resolution_cm": 3},
+                        headers=h).json()["id"]
+        j = wait(c, h, first, states=("running",))
+        pid = c.app.state.db.one("SELECT worker_pid FROM jobs WHERE id=?", first)["worker_pid"]
+        os.kill(pid, signal.SIGKILL)
+        j = wait(c, h, first)
+        assert j["status"] == "failed" and "stopped unexpectedly" in j["error"], j
+        j2 = wait(c, h, second)  # the replacement worker runs the next one
+        assert j2["status"] == "done", j2
+
+
+def test_restart_requeues_running_and_keeps_queued(tmp_path):
+    s = _settings(tmp_path)
+    with TestClient(create_app(s)) as c:
+        h = token(c)
+        first = c.post("/api/tryons", json={"body": "default:female", "garment": "skirt", "resolution_cm": 3},
+                       headers=h).json()["id"]
+        second = c.post("/api/tryons", json={"body": "default:female", "garment": "skirt", "resolution_cm": 3},
+                        headers=h).json()["id"]
+        wait(c, h, first, states=("running",))
+    # the service stopped (workers killed) while `first` ran and `second` waited
+    with TestClient(create_app(s)) as c:
+        j = wait(c, h, first)
+        assert j["status"] == "done" and j["attempts"] == 2, j
+        assert wait(c, h, second)["status"] == "done"
