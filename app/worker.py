@@ -93,10 +93,6 @@ def _run(req: dict, out: Path, progress) -> dict:
         name = g.get("label", name)
     fabric = req.get("fabric", "cotton")
     walking = req.get("motion", "none") == "walk"
-    if walking and body.rig is None:
-        from engine.body.fit import fit_rig
-
-        body = fit_rig(body)
     res, report = run_tryon(body, spec, fabric=fabric, h=req.get("resolution_cm", 1.5) / 100.0,
                             options=DrapeOptions(fabric=fabric), place=place, source=name, progress=progress)
     out.mkdir(parents=True, exist_ok=True)
@@ -104,8 +100,13 @@ def _run(req: dict, out: Path, progress) -> dict:
     if walking:
         from engine.scene.walk import WalkOptions, walk_cloth, walk_report, write_walk_outputs
 
-        w = walk_cloth(body, res, WalkOptions(seconds=req.get("seconds", 4.0)), texel=0.005,
+        walker = body
+        if body.rig is None:  # a scan walks with the default body's skeleton fitted to it
+            from engine.body.fit import fit_rig
+
+            walker = fit_rig(body)
+        w = walk_cloth(walker, res, WalkOptions(seconds=req.get("seconds", 4.0)), texel=0.005,
                        tol=res.model.params.tolerance, progress=progress)
         report = walk_report(report, w.report)
-        write_walk_outputs(out, body, w, report)
+        write_walk_outputs(out, walker, w, report)
     return report

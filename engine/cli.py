@@ -252,20 +252,23 @@ def walk_cmd(
                 typer.echo(f"note: {line}", err=True)
         else:
             b = _body(body, up, front)
+        walker = b
         if b.rig is None and track is None:  # a scan: give it the default body's skeleton and weights
             from engine.body.fit import fit_rig
 
-            b = fit_rig(b)
-            typer.echo(f"note: {b.notes[-1]}", err=True)
+            walker = fit_rig(b)
+            typer.echo(f"note: {walker.notes[-1]}", err=True)
         spec, place, name = resolve_garment(garment, b, size)
         prog, update = _progress_printer()
         with prog:
             res, report = run_tryon(b, spec, fabric=fabric, h=resolution / 100.0, texel=texel / 1000.0,
                                     options=DrapeOptions(fabric=fabric), place=place, source=name, progress=update)
-            w = walk_cloth(b, res, wo, texel=texel / 1000.0, tol=res.model.params.tolerance, progress=update,
-                           track=track)
+            # (a scan is dressed as loaded, as `tryon drape` does -- measured: dressed with the
+            # fitted segment maps, the sample skirt on the sample scan was left at 17 % strain)
+            w = walk_cloth(walker, res, wo, texel=texel / 1000.0, tol=res.model.params.tolerance,
+                           progress=update, track=track)
         full = walk_report(report, w.report)
-        for p in write_walk_outputs(out, b, w, full):
+        for p in write_walk_outputs(out, walker, w, full):
             typer.echo(str(p))
         r = w.report
         typer.echo(f"{report['cloth_vertices']} cloth vertices; dressed in {report['wall_seconds']['total']:.1f} s; "
