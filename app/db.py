@@ -19,7 +19,7 @@ CREATE TABLE IF NOT EXISTS garments (id TEXT PRIMARY KEY, owner TEXT, file TEXT,
 CREATE TABLE IF NOT EXISTS jobs (id TEXT PRIMARY KEY, owner TEXT, request TEXT, status TEXT,
     progress REAL DEFAULT 0, stage TEXT DEFAULT '', message TEXT DEFAULT '', error TEXT,
     attempts INTEGER DEFAULT 0, worker_pid INTEGER, cancel INTEGER DEFAULT 0,
-    created REAL, started REAL, finished REAL, report TEXT);
+    created REAL, started REAL, finished REAL, report TEXT, viewer_port INTEGER);
 CREATE INDEX IF NOT EXISTS jobs_status ON jobs(status, created);
 """
 
@@ -89,6 +89,6 @@ class DB:
             return dict(r)
 
     def finish(self, jid: str, status: str, error: str | None = None, report: dict | None = None) -> None:
-        self.run("UPDATE jobs SET status=?, error=?, report=?, finished=?, worker_pid=NULL WHERE id=? "
-                 "AND status='running'", status, error, json.dumps(report) if report is not None else None,
+        self.run("UPDATE jobs SET status=?, error=?, report=?, finished=?, worker_pid=NULL, viewer_port=NULL "
+                 "WHERE id=? AND status='running'", status, error, json.dumps(report) if report is not None else None,
                  time.time(), jid)

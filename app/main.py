@@ -18,9 +18,9 @@ from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Literal
 
-from fastapi import Depends, FastAPI, File, Header, HTTPException, Query, Request, UploadFile
+from fastapi import Cookie, Depends, FastAPI, File, Header, HTTPException, Query, Request, UploadFile, WebSocket
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, JSONResponse, RedirectResponse
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, Field
 
@@ -32,7 +32,8 @@ from app.worker import job_dir
 WEB = Path(__file__).resolve().parents[1] / "web"
 BODY_EXT = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 RESULT_FILES = ("scene.glb", "garment.obj", "front.png", "side.png", "back.png", "report.json", "anim.glb",
-                "strip.png")
+                "strip.png", "recording.viser")
+VIEWER_COOKIE = "tryon_viewer"
 
 
 class DefaultBodyIn(BaseModel):
@@ -238,6 +239,9 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
             out["report"] = json.loads(row["report"] or "{}")
             d = job_dir(s.data_dir, row["id"])
             out["files"] = {n: f"/api/tryons/{row['id']}/files/{n}" for n in RESULT_FILES if (d / n).exists()}
+        live = row["status"] == "running" and row["viewer_port"]
+        recorded = row["status"] == "done" and (job_dir(s.data_dir, row["id"]) / "recording.viser").exists()
+        out["viewer"] = f"/viewer/{row['id']}/" if live or recorded else None
         return out
 
     @app.post("/api/tryons", status_code=202)
@@ -317,6 +321,102 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
         if not p.is_file():
             raise HTTPException(404, f"'{name}' is not there (yet): the try-on is not done, or did not make it")
         return FileResponse(p)
+
+    # --- the live viewer (viser), relayed ------------------------------------------------
+    def viewer_owner(jid: str, token: str | None, cookie: str | None, authorization: str | None = None) -> dict:
+        t = token or cookie
+        if not t and authorization and authorization.lower().startswith("bearer "):
+            t = authorization[7:].strip()
+        if not t or (t not in s.tokens and db.one("SELECT token FROM tokens WHERE token=?", t) is None):
+            raise HTTPException(401, "open the viewer with ?token=<your API token>")
+        row = db.one("SELECT * FROM jobs WHERE id=? AND owner=?", jid, t)
+        if row is None:
+            raise HTTPException(404, f"no try-on '{jid}' for this token")
+        return {**row, "_token": t}
+
+    @app.get("/viewer/{jid}", include_in_schema=False)
+    def viewer_slash(jid: str, request: Request):
+        q = f"?{request.url.query}" if request.url.query else ""
+        return RedirectResponse(f"/viewer/{jid}/{q}")
+
+    @app.get("/viewer/{jid}/", include_in_schema=False)
+    def viewer_page(jid: str, token: str | None = Query(None), playbackPath: str | None = Query(None),
+                    tryon_viewer: str | None = Cookie(None), authorization: str | None = Header(None)):
+        """The viser client. While the try-on runs it connects back to ws://…/viewer/{jid} (relayed
+        to the worker's viser server); once done it plays the try-on's recording."""
+        import viser
+
+        row = viewer_owner(jid, token, tryon_viewer, authorization)
+        rec = job_dir(s.data_dir, jid) / "recording.viser"
+        if row["status"] == "done" and rec.exists() and playbackPath is None:
+            resp = RedirectResponse(f"/viewer/{jid}/?playbackPath=/viewer/{jid}/recording.viser")
+        elif row["status"] not in ("running", "done"):
+            raise HTTPException(409, f"try-on '{jid}' is {row['status']}: nothing to show "
+                                     + ("yet (it has not started)" if row["status"] == "queued" else ""))
+        else:
+            html = (Path(viser.__file__).parent / "client" / "build" / "index.html").read_text()
+            resp = HTMLResponse(html)
+        resp.set_cookie(VIEWER_COOKIE, row["_token"], path=f"/viewer/{jid}", httponly=True, samesite="strict")
+        return resp
+
+    @app.get("/viewer/{jid}/recording.viser", include_in_schema=False)
+    def viewer_recording(jid: str, token: str | None = Query(None), tryon_viewer: str | None = Cookie(None)):
+        viewer_owner(jid, token, tryon_viewer)
+        p = job_dir(s.data_dir, jid) / "recording.viser"
+        if not p.is_file():
+            raise HTTPException(404, "no recording (yet): the try-on is not done")
+        return FileResponse(p, media_type="application/octet-stream")
+
+    @app.websocket("/viewer/{jid}")
+    async def viewer_socket(ws: WebSocket, jid: str):
+        """Relay the viser client's websocket to the worker's viser server, passing its
+        subprotocol (viser-v<version>) through; both directions as they come."""
+        import asyncio
+
+        from websockets.asyncio.client import connect
+
+        t = ws.query_params.get("token") or ws.cookies.get(VIEWER_COOKIE)
+        row = db.one("SELECT * FROM jobs WHERE id=? AND owner=?", jid, t) if t else None
+        if row is None or not row["viewer_port"] or row["status"] != "running":
+            await ws.close(code=4404, reason="no live viewer for this try-on (not running, or not yours)")
+            return
+        protos = ws.scope.get("subprotocols") or []
+        try:
+            upstream = await connect(f"ws://127.0.0.1:{row['viewer_port']}", subprotocols=protos or None,
+                                     max_size=None, open_timeout=5)
+        except Exception:
+            await ws.close(code=1011, reason="the try-on's viewer is not reachable")
+            return
+        await ws.accept(subprotocol=upstream.subprotocol)
+
+        async def down():
+            async for m in upstream:
+                if isinstance(m, bytes):
+                    await ws.send_bytes(m)
+                else:
+                    await ws.send_text(m)
+
+        async def up():
+            while True:
+                msg = await ws.receive()
+                if msg["type"] == "websocket.disconnect":
+                    return
+                if msg.get("bytes") is not None:
+                    await upstream.send(msg["bytes"])
+                elif msg.get("text") is not None:
+                    await upstream.send(msg["text"])
+
+        tasks = [asyncio.create_task(down()), asyncio.create_task(up())]
+        try:
+            await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            for t_ in tasks:
+                t_.cancel()
+            await upstream.close()
+            try:
+                await ws.close()
+            except RuntimeError:
+                pass
 
     # --- the page -----------------------------------------------------------------------
     @app.get("/", include_in_schema=False)

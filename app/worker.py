@@ -54,8 +54,11 @@ def run_job(db: DB, job: dict, data_dir: Path) -> None:
             raise Cancelled()
         db.run("UPDATE jobs SET stage=?, progress=?, message=? WHERE id=?", stage, float(fraction), message, jid)
 
+    def live(port: int) -> None:
+        db.run("UPDATE jobs SET viewer_port=? WHERE id=?", port, jid)
+
     try:
-        report = _run(json.loads(job["request"]), out, progress)
+        report = _run(json.loads(job["request"]), out, progress, live)
     except Cancelled:
         shutil.rmtree(out, ignore_errors=True)
         db.finish(jid, "cancelled", "cancelled on request")
@@ -76,11 +79,9 @@ def run_job(db: DB, job: dict, data_dir: Path) -> None:
     db.finish(jid, "done", None, report)
 
 
-def _run(req: dict, out: Path, progress) -> dict:
+def _run(req: dict, out: Path, progress, live=None) -> dict:
     from engine.body import resolve_body
-    from engine.scene.drape import DrapeOptions
     from engine.scene.garments import resolve_garment
-    from engine.scene.tryon import run_tryon, write_outputs
 
     progress("body", 0.0, "loading the body")
     b = req["body"]
@@ -93,8 +94,24 @@ def _run(req: dict, out: Path, progress) -> dict:
         name = g.get("label", name)
     fabric = req.get("fabric", "cotton")
     walking = req.get("motion", "none") == "walk"
+    from app.viewer import LiveView
+
+    view = LiveView(body.vertices, body.faces)
+    try:
+        if live is not None:
+            live(view.port)
+        return _simulate(req, body, spec, place, name, fabric, walking, out, progress, view)
+    finally:
+        view.close()
+
+
+def _simulate(req, body, spec, place, name, fabric, walking, out, progress, view) -> dict:
+    from engine.scene.drape import DrapeOptions
+    from engine.scene.tryon import run_tryon, write_outputs
+
     res, report = run_tryon(body, spec, fabric=fabric, h=req.get("resolution_cm", 1.5) / 100.0,
-                            options=DrapeOptions(fabric=fabric), place=place, source=name, progress=progress)
+                            options=DrapeOptions(fabric=fabric), place=place, source=name, progress=progress,
+                            observer=view)
     out.mkdir(parents=True, exist_ok=True)
     write_outputs(out, body, res, report, size=500)
     if walking:
@@ -106,7 +123,8 @@ def _run(req: dict, out: Path, progress) -> dict:
 
             walker = fit_rig(body)
         w = walk_cloth(walker, res, WalkOptions(seconds=req.get("seconds", 4.0)), texel=0.005,
-                       tol=res.model.params.tolerance, progress=progress)
+                       tol=res.model.params.tolerance, progress=progress, observer=view)
         report = walk_report(report, w.report)
         write_walk_outputs(out, walker, w, report)
+    view.save(out / "recording.viser")
     return report

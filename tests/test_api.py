@@ -195,3 +195,39 @@ def test_restart_requeues_running_and_keeps_queued(tmp_path):
         j = wait(c, h, first)
         assert j["status"] == "done" and j["attempts"] == 2, j
         assert wait(c, h, second)["status"] == "done"
+
+
+def test_viewer_relay_live_and_recording(tmp_path):
+    """While a try-on runs, the viewer websocket at /viewer/{job} reaches the worker's viser
+    server through the relay, with viser's subprotocol passed through; once done, the page
+    plays the recording. Other tokens get nothing."""
+    import viser
+
+    with TestClient(create_app(_settings(tmp_path))) as c:
+        h = token(c)
+        other = token(c)["Authorization"][7:]
+        tok = h["Authorization"][7:]
+        jid = c.post("/api/tryons", json={"body": "default:female", "garment": "skirt", "resolution_cm": 3,
+                                          "motion": "walk", "seconds": 1.0}, headers=h).json()["id"]
+        t0 = time.time()
+        while time.time() - t0 < 120:
+            j = c.get(f"/api/tryons/{jid}", headers=h).json()
+            if j["status"] == "running" and j["viewer"]:
+                break
+            time.sleep(0.2)
+        assert j["viewer"] == f"/viewer/{jid}/", j
+        page = c.get(f"/viewer/{jid}/?token={tok}")
+        assert page.status_code == 200 and "<html" in page.text[:200].lower()
+        assert c.get(f"/viewer/{jid}/?token={other}").status_code == 404
+        proto = f"viser-v{viser.__version__}"
+        with c.websocket_connect(f"/viewer/{jid}?token={tok}", subprotocols=[proto]) as ws:
+            assert ws.accepted_subprotocol == proto
+            first = ws.receive_bytes()  # viser's messages (msgpack), relayed
+            assert len(first) > 0
+        j = wait(c, h, jid)
+        assert j["status"] == "done", j
+        r = c.get(f"/viewer/{jid}/?token={tok}", follow_redirects=False)
+        assert r.status_code == 307 and "playbackPath" in r.headers["location"]
+        rec = c.get(f"/viewer/{jid}/recording.viser?token={tok}")
+        assert rec.status_code == 200 and len(rec.content) > 10000  # body + cloth frames
+        assert c.get(f"/viewer/{jid}/recording.viser?token={other}").status_code == 404

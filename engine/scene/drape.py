@@ -28,6 +28,9 @@ from engine.errors import SimulationError
 from engine.garment.garment import Garment
 
 Progress = Callable[[str, float, str], None]  # (stage, fraction 0..1, message)
+# (stage, cloth positions (N, 3), triangles (F, 3), body vertices (M, 3) or None when unchanged):
+# called every `observe_every` s of simulated time, e.g. to stream the cloth to a viewer
+Observer = Callable[[str, np.ndarray, np.ndarray, "np.ndarray | None"], None]
 
 
 @dataclass
@@ -50,6 +53,7 @@ class DrapeOptions:
     drape_min: float = 0.5  # s: drape at least this long after sewing
     settle_speed: float = 0.005  # m/s: RMS drift of the vertices over a window ...
     too_tight: float = 0.10  # a drape whose strain exceeds the fabric's threshold by this is refused
+    observe_every: float = 0.02  # s of simulated time between calls of the observer, if any
     settle_time: float = 0.25  # s: ... of this length, twice in a row (a window long against
     # the cloth's vibration, whose amplitude A alone reads as 2 A / window: at 0.1 s a quarter
     # millimetre of it kept dresses and shirts "moving" for the whole budget)
@@ -75,7 +79,8 @@ def _noop(stage: str, fraction: float, message: str) -> None:
 
 
 def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOptions | None = None,
-                  progress: Progress = _noop, sew_collider: Collider | None = None) -> DrapeResult:
+                  progress: Progress = _noop, sew_collider: Collider | None = None,
+                  observer: Observer | None = None) -> DrapeResult:
     """sew_collider: the body as seen while sewing, when it differs from the drape's (a top
     without sleeves is sewn against the torso alone -- its shoulder seams close through the
     arm's root, as a person's arm goes through the armhole -- and draped against the whole body,
@@ -102,6 +107,8 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
         weld_gap = o.weld_gap if o.weld_gap is not None else 1.0 * _edge(garment)
         gap0 = float(seam_gaps(state.x, pairs, gaps).max())
         check_every = max(1, int(0.005 / dt))
+        observe = max(1, int(o.observe_every / dt))
+        tri0 = _triangles(model) if observer is not None else None
         solver.strain_guard = None  # sewing stretches cloth by design; the guard and the strain
         solver.recover = 1e9  # recovery are for the drape (a new solver is made after welding)
         solver.sewing = (pairs, welded, o.sew_tau, o.sew_vmax)
@@ -109,6 +116,8 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
             g = o.sew_gravity * min(1.0, (it + 1) * dt / o.gravity_ramp)  # let the seams catch first
             solver.step(state, gravity_scale=g, damping_scale=o.sew_damping, friction_scale=o.sew_friction)
             hold_welds(state.x, state.v, model.mass, pairs, welded)
+            if observer is not None and it % observe == 0:
+                observer("sewing", state.x, tri0, None)
             if it % check_every == 0:
                 seam_gaps(state.x, pairs, gaps)
                 welded |= gaps < weld_gap
@@ -150,11 +159,15 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
     min_it = int(np.ceil(o.drape_min / dt))
     window = max(1, int(np.ceil(o.settle_time / dt)))
     check_every = max(1, int(0.005 / dt))
+    observe = max(1, int(o.observe_every / dt))
+    tri1 = _triangles(model) if observer is not None else None
     ramp_it = max(1, int(o.gravity_ramp / dt))
     settled = False
     snap, calm, drift = state.x.copy(), 0, np.inf
     for it in range(budget):
         solver.step(state, gravity_scale=min(1.0, (it + 1) / ramp_it), damping_scale=o.drape_damping)
+        if observer is not None and it % observe == 0:
+            observer("draping", state.x, tri1, None)
         if it % check_every == 0:
             _check_finite(state, "draping")
             progress("draping", min(1.0, it / max(min_it, 1)), f"drift {drift * 100:.2f} cm/s")

@@ -73,8 +73,10 @@ def plan_maps(body: Body, garment: Garment, texel: float, collision: str,
 
 def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float = 0.015,
               texel: float = 0.005, collision: str = "image", options: DrapeOptions | None = None,
-              place=None, source: str = "pattern", progress: Progress | None = None) -> tuple[DrapeResult, dict]:
-    """Sew and drape `spec` on `body`; returns the result and the report (see DESIGN)."""
+              place=None, source: str = "pattern", progress: Progress | None = None,
+              observer=None) -> tuple[DrapeResult, dict]:
+    """Sew and drape `spec` on `body`; returns the result and the report (see DESIGN).
+    observer: see engine.scene.drape.Observer (the cloth as it is simulated, for a live view)."""
     from engine.collide.bvh import MeshBVH, ObjectSpaceCollider, penetration_stats
 
     progress = progress or (lambda *a: None)
@@ -115,7 +117,7 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
         collider = ObjectSpaceCollider(body.vertices, body.faces, tolerance=o.params.tolerance)
         map_info = {"maps": [], "bvh_triangles": int(len(body.faces))}
     t_maps = time.perf_counter() - t0
-    res = sew_and_drape(garment, collider, o, progress, sew_collider=sew_collider)
+    res = sew_and_drape(garment, collider, o, progress, sew_collider=sew_collider, observer=observer)
     bvh = MeshBVH(body.vertices, body.faces)
     pen = penetration_stats(body.vertices, body.faces, res.positions, bvh=bvh)
     iters = res.iterations["sewing"] + res.iterations["draping"]

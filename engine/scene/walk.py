@@ -96,8 +96,9 @@ def walk_segments(body: Body, track: BodyTrack, garment_top: float) -> tuple[lis
 
 
 def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: float, tol: float,
-               progress: Progress | None = None, track: BodyTrack | None = None) -> WalkResult:
-    """Walk `body` wearing the draped garment `drape` for options.seconds."""
+               progress: Progress | None = None, track: BodyTrack | None = None, observer=None) -> WalkResult:
+    """Walk `body` wearing the draped garment `drape` for options.seconds. observer: called
+    every frame (engine.scene.drape.Observer, with the body's vertices of the frame)."""
     from engine.collide.bvh import MeshBVH
     from engine.collide.maps import MapRenderer
     from engine.collide.moving import TrackCollider
@@ -178,6 +179,8 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
                                                  "p99": float(np.percentile(depth, 99)) * 1000},
                               "strain_max": strain})
             progress("walking", i / n_frames, f"frame {i}/{n_frames}, strain {100 * strain:.1f} %")
+            if observer is not None:
+                observer("walking", x, drape.triangles, bv)
     finally:
         renderer.release()
     wall_walk = time.perf_counter() - t_walk0 - t_pen
