@@ -14,4 +14,6 @@ COPY web web
 RUN pip install --no-cache-dir --no-deps -e . \
     && tryon body info default:female >/dev/null   # build and cache the default body at image build time
 ENV TRYON_CACHE=/root/.cache/tryon
-CMD ["tryon", "--help"]
+ENV TRYON_DATA=/srv/tryon/data
+EXPOSE 8000
+CMD ["python", "-m", "uvicorn", "--factory", "app.main:create_app", "--host", "0.0.0.0", "--port", "8000"]

@@ -1,13 +1,19 @@
-# The two commands of the README:  `make demo` (the main job) and `make test` (the tests).
+# The two commands of the README:  `make run` (the main job: the service) and `make test` (the tests).
 # Both do all the set-up first (scripts/setup.sh: apt GL libraries, .venv, pinned pip packages).
 SHELL := /bin/bash
 VENV := .venv/bin
 OUT ?= out/demo
 
-.PHONY: setup demo test test-slow bench clean
+PORT ?= 8000
+
+.PHONY: setup run demo test test-slow bench clean
 
 setup:
 	@bash scripts/setup.sh
+
+run: setup
+	@echo "tryon: open http://localhost:$(PORT)/ (API docs: /docs; data in $${TRYON_DATA:-data}/)"
+	$(VENV)/python -m uvicorn --factory app.main:create_app --host 0.0.0.0 --port $(PORT)
 
 demo: setup
 	$(VENV)/tryon body info default:female

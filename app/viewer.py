@@ -29,6 +29,9 @@ class LiveView:
         self.server = viser.ViserServer(host="127.0.0.1", port=port or free_port(), verbose=False)
         self.port = int(self.server.get_port())
         self.server.scene.set_up_direction("+y")
+        top = float(np.asarray(body_vertices)[:, 1].max())
+        self.server.initial_camera.position = (1.2, 0.75 * top, 2.6)  # in front, a little to the side
+        self.server.initial_camera.look_at = (0.0, 0.55 * top, 0.0)
         self.recording = self.server.get_scene_serializer()
         self.body = self.server.scene.add_mesh_simple("/body", np.asarray(body_vertices, np.float32),
                                                       np.asarray(body_faces, np.uint32), color=BODY_RGB)
@@ -47,8 +50,8 @@ class LiveView:
         self.last = now
         v = np.asarray(positions, np.float32)
         if self.garment is None or len(triangles) != self.n_faces:
-            if self.garment is not None:
-                self.garment.remove()
+            # (a node added under the same name replaces the old one -- also in the recording,
+            # where a remove() + add was played back with both meshes shown)
             self.garment = self.server.scene.add_mesh_simple("/garment", v, np.asarray(triangles, np.uint32),
                                                              color=GARMENT_RGB, side="double")
             self.n_faces = len(triangles)

@@ -5,7 +5,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-APT_PKGS=(libosmesa6 libegl1 libegl-mesa0 libgl1-mesa-dri libopengl0 libgbm1 libglx-mesa0)
+APT_PKGS=(libosmesa6 libegl1 libegl-mesa0 libgl1-mesa-dri libopengl0 libgbm1 libglx-mesa0
+          chromium)  # chromium: the browser test (Playwright drives Debian's, never downloads one)
 missing=()
 for p in "${APT_PKGS[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -1,0 +1,97 @@
+"""End to end in a real browser: Debian's chromium driven by Playwright, against the service
+started as a user would (uvicorn, a real SQLite file, a spawned worker)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+CHROMIUM = "/usr/bin/chromium"
+ROOT = Path(__file__).resolve().parents[1]
+
+pytestmark = pytest.mark.skipif(not Path(CHROMIUM).exists(), reason="Debian's chromium is not installed "
+                                "(scripts/setup.sh installs it)")
+
+
+def _port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture()
+def server(tmp_path):
+    port = _port()
+    env = dict(os.environ, TRYON_DATA=str(tmp_path / "data"))
+    p = subprocess.Popen([sys.executable, "-m", "uvicorn", "--factory", "app.main:create_app", "--host", "127.0.0.1",
+                          "--port", str(port)], cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    url = f"http://127.0.0.1:{port}"
+    t0 = time.time()
+    while time.time() - t0 < 60:
+        try:
+            urllib.request.urlopen(url + "/web/index.html", timeout=1)
+            break
+        except OSError:
+            if p.poll() is not None:
+                raise AssertionError(p.stdout.read().decode()[-2000:])
+            time.sleep(0.3)
+    yield url
+    p.terminate()
+    try:
+        p.wait(10)
+    except subprocess.TimeoutExpired:
+        p.kill()
+
+
+def _colour_share(img: np.ndarray, rgb, tol=40) -> float:
+    d = np.abs(img[..., :3].astype(int) - np.array(rgb)).max(axis=-1)
+    return float((d < tol).mean())
+
+
+def test_page_dresses_the_default_avatar(server, tmp_path):
+    from PIL import Image
+    from playwright.sync_api import sync_playwright
+
+    shots = ROOT / "out" / "page"
+    shots.mkdir(parents=True, exist_ok=True)
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=CHROMIUM, args=["--enable-unsafe-swiftshader"])
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        errors = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(server + "/")
+        page.wait_for_selector("#garment option[value=dress]", state="attached")
+        page.select_option("#garment", "dress")
+        page.select_option("#quality", "3")
+        page.screenshot(path=str(shots / "1-form.png"))
+        page.click("#tryon")
+        page.wait_for_function("document.getElementById('status').textContent.startsWith('Done')", timeout=240_000)
+        frame = page.frame_locator("#viewer")
+        frame.locator("canvas").first.wait_for(timeout=60_000)
+        time.sleep(6)  # the recording plays (the last frame is the draped dress)
+        page.screenshot(path=str(shots / "2-done.png"))
+        page.locator("#viewer").screenshot(path=str(tmp_path / "viewer.png"))
+        shutil.copy(tmp_path / "viewer.png", shots / "3-viewer.png")
+        link = page.locator("#download-scene-glb")
+        assert link.count() == 1
+        with page.expect_download() as d:
+            link.click()
+        glb = d.value.path()
+        assert open(glb, "rb").read(4) == b"glTF"
+        browser.close()
+    img = np.asarray(Image.open(tmp_path / "viewer.png").convert("RGB"))
+    # both meshes are on screen: skin-coloured body pixels and blue garment pixels (viser shades
+    # them, so a generous tolerance around the base colours)
+    body = _colour_share(img, (204, 173, 148), 60)
+    cloth = _colour_share(img, (70, 110, 190), 60)
+    assert body > 0.002 and cloth > 0.002, (body, cloth)
+    assert errors == [], errors
