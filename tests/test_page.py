@@ -32,8 +32,9 @@ def _port() -> int:
 def server(tmp_path):
     port = _port()
     env = dict(os.environ, TRYON_DATA=str(tmp_path / "data"))
+    log = open(tmp_path / "server.log", "wb")  # a file, not a pipe: a full pipe would block the server
     p = subprocess.Popen([sys.executable, "-m", "uvicorn", "--factory", "app.main:create_app", "--host", "127.0.0.1",
-                          "--port", str(port)], cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+                          "--port", str(port)], cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
     url = f"http://127.0.0.1:{port}"
     t0 = time.time()
     while time.time() - t0 < 60:
@@ -42,7 +43,7 @@ def server(tmp_path):
             break
         except OSError:
             if p.poll() is not None:
-                raise AssertionError(p.stdout.read().decode()[-2000:])
+                raise AssertionError((tmp_path / "server.log").read_text()[-2000:])
             time.sleep(0.3)
     yield url
     p.terminate()
@@ -50,6 +51,7 @@ def server(tmp_path):
         p.wait(10)
     except subprocess.TimeoutExpired:
         p.kill()
+    log.close()
 
 
 def _colour_share(img: np.ndarray, rgb, tol=40) -> float:
