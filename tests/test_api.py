@@ -231,3 +231,49 @@ def test_viewer_relay_live_and_recording(tmp_path):
         rec = c.get(f"/viewer/{jid}/recording.viser?token={tok}")
         assert rec.status_code == 200 and len(rec.content) > 10000  # body + cloth frames
         assert c.get(f"/viewer/{jid}/recording.viser?token={other}").status_code == 404
+
+
+def test_settings_tokens_and_listing(tmp_path):
+    with TestClient(create_app(_settings(tmp_path, tokens=["shop-backend"]), start_workers=False)) as c:
+        h = {"Authorization": "Bearer shop-backend"}
+        assert c.get("/api/bodies", headers=h).json() == []
+        b = c.post("/api/bodies/default", json={"preset": "male", "weight": 0.7}, headers=h).json()
+        assert [x["id"] for x in c.get("/api/bodies", headers=h).json()] == [b["id"]]
+        with open(SAMPLE_SKIRT, "rb") as f:
+            g = c.post("/api/garments", files={"file": ("flare.json", f)}, headers=h).json()
+        assert c.get(f"/api/garments/{g['id']}", headers=h).json()["name"] == "flare"
+        j = c.post("/api/tryons", json={"body_id": b["id"], "garment": g["id"]}, headers=h)
+        assert j.status_code == 202 and j.json()["request"]["garment"]["label"] == "flare"
+        r = c.post("/api/tryons", json={"body_id": b["id"], "garment": g["id"], "size": "M"}, headers=h)
+        assert r.status_code == 422 and "own size" in r.json()["error"]
+        assert [x["id"] for x in c.get("/api/tryons", headers=h).json()] == [j.json()["id"]]
+        assert c.get(f"/viewer/{j.json()['id']}/?token=shop-backend").status_code == 409  # queued: nothing yet
+        assert c.delete(f"/api/garments/{g['id']}", headers=h).status_code == 204
+        assert c.get(f"/api/garments/{g['id']}", headers=h).status_code == 404
+        assert not any((c.app.state.settings.data_dir / "uploads").glob("pattern-*"))
+
+
+def test_cancel_and_delete_running(tmp_path):
+    with TestClient(create_app(_settings(tmp_path))) as c:
+        h = token(c)
+        a = c.post("/api/tryons", json={"body": "default:female", "garment": "dress", "resolution_cm": 2},
+                   headers=h).json()["id"]
+        b = c.post("/api/tryons", json={"body": "default:female", "garment": "dress", "resolution_cm": 2},
+                   headers=h).json()["id"]
+        wait(c, h, a, states=("running",))
+        time.sleep(1.0)
+        assert c.post(f"/api/tryons/{a}/cancel", headers=h).status_code == 202
+        j = wait(c, h, a, timeout=30)
+        assert j["status"] == "cancelled", j
+        assert not (c.app.state.settings.data_dir / "jobs" / a).exists()
+        wait(c, h, b, states=("running",))
+        time.sleep(1.0)
+        assert c.delete(f"/api/tryons/{b}", headers=h).status_code == 204
+        assert c.get(f"/api/tryons/{b}", headers=h).status_code == 404
+        t0 = time.time()  # the worker stops it and cleans up; it is free for the next one
+        while c.app.state.db.one("SELECT COUNT(*) n FROM jobs")["n"] != 1 and time.time() - t0 < 5:
+            time.sleep(0.2)
+        c2 = c.post("/api/tryons", json={"body": "default:female", "garment": "skirt", "resolution_cm": 4},
+                    headers=h).json()["id"]
+        assert wait(c, h, c2, timeout=120)["status"] == "done"
+        assert not (c.app.state.settings.data_dir / "jobs" / b).exists()
