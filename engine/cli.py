@@ -225,6 +225,7 @@ def walk_cmd(
     velocity_mode: str = typer.Option("average", "--velocity-mode",
                                       help="Super-elasticity rule while walking: average (eq. 5), directional "
                                       "(eq. 6; not yet stable) or zero."),
+    collision: str = typer.Option("image", "--collision", help="image (depth/normal/velocity maps) or object (BVH)."),
     up: Optional[str] = typer.Option(None, "--up", help=UP_HELP),
     front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP),
 ):
@@ -240,6 +241,7 @@ def walk_cmd(
         from engine.scene.walk import WalkOptions, walk_cloth, walk_report, write_walk_outputs
 
         wo = WalkOptions(seconds=seconds, fps=fps, reuse_maps=reuse_maps, velocity_mode=velocity_mode,
+                         collision=collision,
                          walk=WalkParams(speed=speed, stride=stride, in_place=in_place))
         wo.validate()  # refuse before dressing
         track = None
@@ -262,7 +264,8 @@ def walk_cmd(
         prog, update = _progress_printer()
         with prog:
             res, report = run_tryon(b, spec, fabric=fabric, h=resolution / 100.0, texel=texel / 1000.0,
-                                    options=DrapeOptions(fabric=fabric), place=place, source=name, progress=update)
+                                    collision=collision, options=DrapeOptions(fabric=fabric), place=place,
+                                    source=name, progress=update)
             # (a scan is dressed as loaded, as `tryon drape` does -- measured: dressed with the
             # fitted segment maps, the sample skirt on the sample scan was left at 17 % strain)
             w = walk_cloth(walker, res, wo, texel=texel / 1000.0, tol=res.model.params.tolerance,

@@ -339,3 +339,18 @@ def test_walking_quality(tmp_path, garment):
         body_c = w.track.vertices(i)[pelvis].mean(axis=0) - body.vertices[pelvis].mean(axis=0)
         cloth_c = w.garment_frames[i].mean(axis=0) - w.garment_frames[0].mean(axis=0)
         assert np.linalg.norm((cloth_c - body_c)[[0, 2]]) < 0.10, (i, cloth_c, body_c)
+
+
+def test_object_space_walk(walked):
+    """The BVH baseline on the moving body (refitted per frame): same checks as image space."""
+    from engine.scene.walk import WalkOptions, walk_cloth
+
+    body, res, _, _ = walked
+    w = walk_cloth(body, res, WalkOptions(seconds=0.6, collision="object"), texel=0.005,
+                   tol=res.model.params.tolerance)
+    r = w.report
+    assert np.all(np.isfinite(w.garment_frames))
+    assert r["penetration_mm"]["p99"] <= 2.0 and r["penetration_mm"]["max"] <= 10.0, r["penetration_mm"]
+    assert r["strain_max"] < 0.15
+    assert any("object-space" in line for line in r["left_out"])
+    assert r["map_frames_rendered"] >= 15  # one refit per frame

@@ -188,3 +188,58 @@ class TrackCollider:
     def release(self) -> None:
         self._kept.clear()
         self.maps = None
+
+
+@serial_kernel
+def _shift_answers(status, depth, normal, velocity, root_v, shift_t, tol):
+    """Object-space answers for a surface moved by (velocity - root_v) * shift_t along its normal
+    (depth = tol - signed distance, exact for every point)."""
+    for i in range(status.shape[0]):
+        un = ((velocity[i, 0] - root_v[0]) * normal[i, 0] + (velocity[i, 1] - root_v[1]) * normal[i, 1]
+              + (velocity[i, 2] - root_v[2]) * normal[i, 2])
+        d = depth[i] + un * shift_t
+        depth[i] = d
+        status[i] = 2 if d > tol else (1 if d > 0.0 else 0)
+
+
+class TrackObjectCollider:
+    """The object-space baseline on a moving body: the BVH over the body triangles is refitted
+    to the nearest frame (relative to the root, like the maps), points move into the root's
+    frame, and the surface between frames moves along its velocity as in TrackCollider."""
+
+    def __init__(self, track: BodyTrack, tol: float):
+        from engine.collide.bvh import ObjectSpaceCollider
+
+        self.track, self.tol = track, float(tol)
+        self.inner = ObjectSpaceCollider(track.frames[0].astype(np.float64), track.body.faces, tolerance=tol,
+                                         vertex_velocities=track.vel[0].astype(np.float64))
+        self._k = 0
+        self._shift_t = 0.0
+        self._offset = np.zeros(3)
+        self._root_v = np.zeros(3)
+        self.version = 0
+        self.stats = {"renders": 0, "reuses": 0, "map_seconds": 0.0, "map_bytes": 0, "asked": 0, "points": 0}
+
+    def set_time(self, t: float) -> None:
+        tr = self.track
+        i = int(round(max(t, 0.0) * tr.fps))
+        k, _ = tr.index(i)
+        if k != self._k:
+            t0 = time.perf_counter()
+            self.inner.update(tr.frames[k].astype(np.float64), tr.vel[k].astype(np.float64))
+            self.stats["map_seconds"] += time.perf_counter() - t0  # (the refit stands in for maps)
+            self.stats["renders"] += 1
+            self._k = k
+        self._root_v = (tr.offset(i + 1) - tr.offset(i - 1)) * tr.fps / 2 if i > 0 else \
+            (tr.offset(1) - tr.offset(0)) * tr.fps
+        self._shift_t = t - i / tr.fps
+        self._offset = tr.offset_at(t)
+        self.version += 1
+
+    def query(self, points: np.ndarray):
+        local = points - self._offset
+        status, normal, velocity, depth = self.inner.query(local)
+        _shift_answers(status, depth, normal, velocity, self._root_v, self._shift_t, self.tol)
+        self.stats["asked"] += points.shape[0]
+        self.stats["points"] += points.shape[0]
+        return status, normal, velocity, depth

@@ -48,10 +48,13 @@ class WalkOptions:
     # 12 passes 517 ms a frame, strain max 7.6 %, penetration max 1.5 mm; 6 passes 418 ms,
     # 7.7 %, 0.6 mm; 3 passes 388 ms, 8.4 %.
     vm_passes: int = 6
+    collision: str = "image"  # or "object": the BVH baseline (engine.collide.moving.TrackObjectCollider)
 
     def validate(self) -> None:
         if not (0.1 <= self.seconds <= 60.0):
             raise InputError(f"--seconds {self.seconds}: walk between 0.1 and 60 s")
+        if self.collision not in ("image", "object"):
+            raise InputError(f"collision '{self.collision}': use image or object")
         if not (1 <= self.vm_passes <= 100):
             raise InputError(f"vm_passes {self.vm_passes}: use 1 .. 100")
         if not (5.0 <= self.fps <= 120.0):
@@ -115,8 +118,10 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
     segs, seg_left = walk_segments(body, track, top)
     left += seg_left
     window = (0.0, min(float(track.frames[:, :, 1].max()), top + 0.15))
-    renderer = MapRenderer(body.faces, segments=body.segments, segment_names=segs, texel=texel, tol=tol,
-                           window=window, with_velocity=True)
+    renderer = None
+    if o.collision == "image":
+        renderer = MapRenderer(body.faces, segments=body.segments, segment_names=segs, texel=texel, tol=tol,
+                               window=window, with_velocity=True)
     n_frames = int(round(o.seconds * track.fps))
     if not track.periodic and n_frames > len(track.frames) - 1:
         n_frames = len(track.frames) - 1
@@ -128,7 +133,15 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
                     "for all " f"{n_frames + 1} frames (float16 copies)")
     else:
         left.append("nothing: the motion is not periodic, so maps are rendered for every frame")
-    collider = TrackCollider(track, renderer, tol=tol, keep=track.periodic and o.reuse_maps)
+    if o.collision == "object":
+        from engine.collide.moving import TrackObjectCollider
+
+        left = [ln for ln in left if not ln.startswith(("maps of frames", "nothing: the motion", "head maps",
+                                                        "arm maps"))]
+        left.append("collision maps, because object-space collision (a BVH refitted every frame) was chosen")
+        collider = TrackObjectCollider(track, tol=tol)
+    else:
+        collider = TrackCollider(track, renderer, tol=tol, keep=track.periodic and o.reuse_maps)
     model = drape.model
     from dataclasses import replace
 
@@ -182,7 +195,8 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
             if observer is not None:
                 observer("walking", x, drape.triangles, bv)
     finally:
-        renderer.release()
+        if renderer is not None:
+            renderer.release()
     wall_walk = time.perf_counter() - t_walk0 - t_pen
     sim_seconds = n_frames * frame_time
     pooled = np.concatenate(depths)  # every cloth vertex of every frame
