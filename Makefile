@@ -6,7 +6,7 @@ OUT ?= out/demo
 
 PORT ?= 8000
 
-.PHONY: setup run demo test test-slow bench clean
+.PHONY: setup run demo test test-slow bench bench-peer clean
 
 setup:
 	@bash scripts/setup.sh
@@ -29,7 +29,11 @@ test-slow: setup
 	$(VENV)/python -m pytest -m slow -q
 
 bench: setup
-	$(VENV)/python scripts/bench_maps.py
+	$(VENV)/tryon bench --out out/bench
+
+# The peer in `tryon bench` (Newton's cloth solver on Warp, CPU): ~400 MB, so not in the default install.
+bench-peer: setup
+	$(VENV)/python -m pip install -q --disable-pip-version-check "warp-lang==1.19.0" "newton==1.8.0"
 
 clean:
 	rm -rf out .pytest_cache

@@ -283,6 +283,29 @@ def walk_cmd(
     _run(go)
 
 
+@app.command("bench")
+def bench_cmd(
+    quick: bool = typer.Option(False, "--quick", help="A reduced run (under two minutes)."),
+    out: Path = typer.Option(Path("out/bench"), "--out", help="Output directory."),
+):
+    """Evidence: seed 003's Table 1 (image vs object space), error against run time (texel, time
+    step, cloth edge), scaling, the stability map, a peer (Newton/Warp) when installed. Writes
+    report.md, results.json and PNG plots."""
+
+    def go():
+        from engine.io.bench_report import write_bench
+        from engine.scene.bench import run_bench
+
+        res = run_bench(quick=quick, progress=lambda m: typer.echo(m, err=True))
+        for p in write_bench(res, out):
+            typer.echo(str(p))
+        st = res["stability"]
+        typer.echo(f"bench done in {res['total_seconds']:.0f} s; stability: {st['unstable']} unstable cell(s) "
+                   f"of {len(st['cells'])}")
+
+    _run(go)
+
+
 @app.command("garments")
 def garments_cmd():
     """List the catalogue garments (names for `tryon drape --garment`), with their sizes."""
