@@ -36,7 +36,8 @@ class LiveView:
         self.body = self.server.scene.add_mesh_simple("/body", np.asarray(body_vertices, np.float32),
                                                       np.asarray(body_faces, np.uint32), color=BODY_RGB)
         self.garment = None
-        self.n_faces = -1
+        self.faces = None
+        self.n_vertices = -1
         self.last = 0.0
         self.frames = 0
 
@@ -49,12 +50,13 @@ class LiveView:
             self.recording.insert_sleep(1 / 30 if walking else MIN_INTERVAL)
         self.last = now
         v = np.asarray(positions, np.float32)
-        if self.garment is None or len(triangles) != self.n_faces:
-            # (a node added under the same name replaces the old one -- also in the recording,
-            # where a remove() + add was played back with both meshes shown)
+        if self.garment is None or triangles is not self.faces or len(v) != self.n_vertices:
+            # a new mesh (welding the seams merges vertices: same face count, other indices);
+            # a node added under the same name replaces the old one -- also in the recording,
+            # where a remove() + add was played back with both meshes shown
+            self.faces, self.n_vertices = triangles, len(v)
             self.garment = self.server.scene.add_mesh_simple("/garment", v, np.asarray(triangles, np.uint32),
                                                              color=GARMENT_RGB, side="double")
-            self.n_faces = len(triangles)
         else:
             self.garment.vertices = v
         if body_vertices is not None:

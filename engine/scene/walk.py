@@ -101,7 +101,8 @@ def walk_segments(body: Body, track: BodyTrack, garment_top: float) -> tuple[lis
 def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: float, tol: float,
                progress: Progress | None = None, track: BodyTrack | None = None, observer=None) -> WalkResult:
     """Walk `body` wearing the draped garment `drape` for options.seconds. observer: called
-    every frame (engine.scene.drape.Observer, with the body's vertices of the frame)."""
+    every frame (engine.scene.drape.Observer, with the body's vertices of the frame; both
+    meshes relative to the root's horizontal travel, so that a viewer keeps the walker in view)."""
     from engine.collide.bvh import MeshBVH
     from engine.collide.maps import MapRenderer
     from engine.collide.moving import TrackCollider
@@ -192,8 +193,8 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
                                                  "p99": float(np.percentile(depth, 99)) * 1000},
                               "strain_max": strain})
             progress("walking", i / n_frames, f"frame {i}/{n_frames}, strain {100 * strain:.1f} %")
-            if observer is not None:
-                observer("walking", x, drape.triangles, bv)
+            if observer is not None:  # a viewer follows the walker: both relative to the root
+                observer("walking", x - off, drape.triangles, bv - off)
     finally:
         if renderer is not None:
             renderer.release()
