@@ -13,7 +13,7 @@ import typer
 from engine.errors import GLUnavailableError, TryonError
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
-                  help="Virtual try-on: bodies, collision maps, dressing (drape) and walking (walk).")
+                  help="Virtual try-on: bodies, collision maps, dressing (drape), walking (walk), evidence (bench).")
 body_app = typer.Typer(no_args_is_help=True, help="Inspect bodies (scans or the default body).")
 app.add_typer(body_app, name="body")
 
