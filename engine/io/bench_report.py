@@ -54,6 +54,10 @@ def _table1(rows) -> list[str]:
           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         s = r["seed"]
+        if "failed" in r:
+            md.append(f"| {r['product']} | {r['collision']} | failed: {r['failed'][:120]} | | | | | | | | "
+                      f"{s[0]} | {s[1]} | {s[2]} | {s[3]} |")
+            continue
         md.append(f"| {r['product']} | {r['collision']} | {r['vertices']} | {r['iterations']} | {r['total_s']:.1f} | "
                   f"{r['ms_per_iteration']:.2f} | {r['ms_cloth']:.2f} | {r['ms_collision']:.2f} | "
                   f"{r['penetration_max_mm']:.1f} | {100 * r['strain_max']:.1f} | {s[0]} | {s[1]} | {s[2]} | {s[3]} |")
@@ -72,6 +76,10 @@ def _sweeps(sw) -> list[str]:
           "pen. max mm | pen. p99 mm | strain % | settled |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in sw["runs"]:
         tx = "-" if r["texel_mm"] is None else f"{r['texel_mm']:g}"
+        if "failed" in r:
+            md.append(f"| {r['collision']} | {r['axis']} | {r['edge_cm']:g} | {tx} | {r['dt_fraction']:g} | "
+                      f"failed: {r['failed'][:100]} | | | | | | | |")
+            continue
         md.append(f"| {r['collision']} | {r['axis']} | {r['edge_cm']:g} | {tx} | {r['dt_fraction']:g} | {r['vertices']} | "
                   f"{r['run_s']:.1f} | {r['distance_mean_mm']:.1f} | {r['distance_p95_mm']:.1f} | "
                   f"{r['penetration_max_mm']:.1f} | {r['penetration_p99_mm']:.1f} | {100 * r['strain_max']:.1f} | "
@@ -84,7 +92,7 @@ def _pareto(sw, path: Path) -> Path:
     fig, ax = plt.subplots(1, 2, figsize=(11, 4.2))
     marks = {"texel": "o", "dt": "s", "edge": "^"}
     for col, colour in (("image", "tab:blue"), ("object", "tab:red")):
-        rows = [r for r in sw["runs"] if r["collision"] == col]
+        rows = [r for r in sw["runs"] if r["collision"] == col and "failed" not in r]
         for axis, m in marks.items():
             rr = [r for r in rows if r["axis"] == axis]
             if rr:
@@ -158,7 +166,7 @@ def _scaling_plot(sc, path: Path) -> Path:
 
 def _stability(st) -> list[str]:
     md = ["## Stability map", "",
-          "The coarse skirt (3 cm), dressed in cotton, then 0.5 s with the cell's stiffness (x cotton as simulated), "
+          "The coarse skirt (3 cm), dressed in cotton, then 0.4 s with the cell's stiffness (x cotton as simulated), "
           "time step (x the eq. 4 bound for that stiffness) and body speed (m/s; 0 = standing). Cells: stable "
           "(strain max in brackets), refused (a clear error), unstable "
           f"(a bug). **Unstable cells: {st['unstable']}.**", ""]

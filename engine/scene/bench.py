@@ -83,7 +83,12 @@ def run_table1(body, quick: bool, say: Say) -> list[dict]:
         target = seed["image"][0] // (3 if quick else 1)
         h = _resolution_for(body, SEED_PRODUCT[product], target)
         for collision in ("image", "object"):
-            res, rep, wall = _dress(body, SEED_PRODUCT[product], h, collision=collision)
+            try:
+                res, rep, wall = _dress(body, SEED_PRODUCT[product], h, collision=collision)
+            except TryonError as e:  # reported, not hidden: the row says why
+                rows.append({"product": product, "collision": collision, "failed": str(e), "seed": seed[collision]})
+                say(f"table1 {product} {collision}: FAILED {e}")
+                continue
             ms = rep["ms_per_iteration"]
             rows.append({"product": product, "collision": collision, "vertices": rep["cloth_vertices_unsewn"],
                          "iterations": rep["iterations"], "total_s": rep["wall_seconds"]["sewing"]
@@ -131,8 +136,17 @@ def run_sweeps(body, quick: bool, say: Say) -> dict:
             kw.update(over)
             key = (collision, kw["h"], kw["texel"] if collision == "image" else None, kw["dt_fraction"])
             if key not in done:  # the base setting appears on every axis: run it once
-                done[key] = _dress(body, garment, kw["h"], texel=kw["texel"], dt_fraction=kw["dt_fraction"],
-                                   collision=collision)
+                try:
+                    done[key] = _dress(body, garment, kw["h"], texel=kw["texel"], dt_fraction=kw["dt_fraction"],
+                                       collision=collision)
+                except TryonError as e:
+                    done[key] = e
+            if isinstance(done[key], TryonError):
+                runs.append({"collision": collision, "axis": axis, "edge_cm": kw["h"] * 100, "failed": str(done[key]),
+                             "dt_fraction": kw["dt_fraction"],
+                             "texel_mm": kw["texel"] * 1000 if collision == "image" else None})
+                say(f"sweep {collision} {axis} {over}: FAILED {done[key]}")
+                continue
             res, rep, wall = done[key]
             mean, p95 = _surface_distance(res.positions, rres.positions, rres.triangles)
             runs.append({"collision": collision, "axis": axis, "edge_cm": kw["h"] * 100,
@@ -263,7 +277,7 @@ def _static_track(body, fps: float = 30.0):
 
 
 def run_stability(body, quick: bool, say: Say) -> dict:
-    """The coarse skirt (3 cm) is dressed once (cotton); each cell then runs it for 0.5 s with
+    """The coarse skirt (3 cm) is dressed once (cotton); each cell then runs it for 0.4 s with
     the cell's stiffness (x the simulated cotton: springs and their damping scaled, the eq. 4
     bound with them), time step (x that bound) and body speed (0: standing; else walking, 0.15 s
     from rest to the full walk). Outcome: stable; refused (a clear error: a time step above the
@@ -289,7 +303,7 @@ def run_stability(body, quick: bool, say: Say) -> dict:
             for s in speeds:
                 cell = {"stiffness": k, "dt_fraction": f, "speed": s}
                 try:
-                    w = walk_cloth(body, drape, WalkOptions(seconds=0.5), texel=0.005,
+                    w = walk_cloth(body, drape, WalkOptions(seconds=0.4), texel=0.005,
                                    tol=model.params.tolerance, track=tracks[s])
                     cell.update(outcome="stable", strain_max=w.report["strain_max"],
                                 penetration_max_mm=w.report["penetration_mm"]["max"])
