@@ -325,12 +325,12 @@ def run_stability(body, quick: bool, say: Say) -> dict:
 def run_peer(quick: bool, say: Say) -> dict:
     """A hanging cloth (square, pinned along one edge, no body): our step against Newton's
     semi-implicit Euler cloth (Warp kernels on the CPU), same vertex count, same stiffness."""
-    try:
-        import newton  # noqa: F401
-        import warp  # noqa: F401
-    except Exception as e:  # not installed: say so (make bench-peer installs them)
-        return {"available": False, "reason": f"newton/warp-lang not importable ({type(e).__name__}: {e}); "
-                                              "install them with `make bench-peer`"}
+    import importlib.util
+
+    missing = [m for m in ("warp", "newton") if importlib.util.find_spec(m) is None]
+    if missing:  # not installed: say so (make bench-peer installs them)
+        return {"available": False, "reason": f"{' and '.join(missing)} not installed; install them with "
+                                              "`make bench-peer`"}
     from engine.scene.bench_peer import compare
 
     return compare(quick, say)

@@ -35,12 +35,19 @@ def _our_sheet(n: int, h: float):
 
 
 def compare(quick: bool, say) -> dict:
+    import tempfile
+
     import warp as wp
 
+    wp.config.quiet = True
+    # a fresh kernel cache, so that the first step measures Warp's compilation (a later run of
+    # the same user would load the cached kernels in well under a second)
+    cache = tempfile.mkdtemp(prefix="tryon-warp-cache-")
+    wp.config.kernel_cache_dir = cache
     import newton
+
     from engine.cloth.solver import ClothSolver
 
-    wp.config.quiet = True
     sizes = (32,) if quick else (32, 64)
     steps = 100 if quick else 300
     h = 0.015
@@ -62,7 +69,7 @@ def compare(quick: bool, say) -> dict:
                      "ms_per_step": ours, "dt_ms": dt * 1000})
         say(f"peer ours {n * n} v: {ours:.3f} ms/step")
 
-        for tri_contact in (False, True):
+        for tri_contact in ((False, True) if n <= 32 else (False,)):  # its self-contact is O(N T)
             builder = newton.ModelBuilder()
             mass = float(model.mass.mean())
             builder.add_cloth_grid(pos=wp.vec3(0.0, 1.5, 0.0), rot=wp.quat_identity(), vel=wp.vec3(0.0, 0.0, 0.0),
@@ -94,7 +101,10 @@ def compare(quick: bool, say) -> dict:
                          "vertices": int(nm.particle_count), "ms_per_step": theirs, "compile_s": first,
                          "dt_ms": dt * 1000, "finite": bool(np.all(np.isfinite(q)))})
             say(f"peer newton ({what}) {nm.particle_count} v: {theirs:.3f} ms/step (first step {first:.1f} s)")
+    import shutil
+
+    shutil.rmtree(cache, ignore_errors=True)
     return {"available": True, "rows": rows, "note": (
         f"A hanging cotton sheet, 1.5 cm grid, pinned along one edge, no body; {steps} steps at our eq. 4 "
-        "time step after a warm-up, on this machine. Newton's first-step time is its kernel compilation "
-        "(or loading from Warp's kernel cache when compiled before).")}
+        "time step after a warm-up, on this machine. Newton's first-step time is its kernels' compilation "
+        "into an empty Warp kernel cache (the first size pays it; later ones reuse the kernels).")}
