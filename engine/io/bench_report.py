@@ -166,7 +166,7 @@ def _scaling_plot(sc, path: Path) -> Path:
 
 def _stability(st) -> list[str]:
     md = ["## Stability map", "",
-          "The coarse skirt (3 cm), dressed in cotton, then 0.4 s with the cell's stiffness (x cotton as simulated), "
+          "The coarse skirt (3 cm), dressed in cotton, then 0.3 s with the cell's stiffness (x cotton as simulated), "
           "time step (x the eq. 4 bound for that stiffness) and body speed (m/s; 0 = standing). Cells: stable "
           "(strain max in brackets), refused (a clear error), unstable "
           f"(a bug). **Unstable cells: {st['unstable']}.**", ""]

@@ -72,7 +72,7 @@ def _resolution_for(body, garment: str, target: int) -> float:
     for _ in range(3):
         n = build_garment(spec, h=h, place=place).n_vertices
         h = h * math.sqrt(n / target)
-    return float(max(h, 0.004))
+    return float(max(h, 0.003))
 
 
 def run_table1(body, quick: bool, say: Say) -> list[dict]:
@@ -121,8 +121,8 @@ def run_sweeps(body, quick: bool, say: Say) -> dict:
                     + [("edge", dict(h=h)) for h in (0.03, 0.02)])
         obj = [("edge", dict(h=0.03))]
     else:
-        ref = dict(h=0.01, texel=0.00125, dt_fraction=0.5)
-        settings = ([("texel", dict(texel=t)) for t in (0.02, 0.01, 0.005, 0.0025, 0.00125)]
+        ref = dict(h=0.01, texel=0.001, dt_fraction=0.5)
+        settings = ([("texel", dict(texel=t)) for t in (0.02, 0.01, 0.005, 0.0025, 0.001)]
                     + [("dt", dict(dt_fraction=f)) for f in (1.0, 0.5, 0.25)]
                     + [("edge", dict(h=h)) for h in (0.03, 0.02, 0.015, 0.01, 0.0075)])
         obj = [("dt", dict(dt_fraction=f)) for f in (1.0, 0.5)] + [("edge", dict(h=h)) for h in (0.03, 0.02)]
@@ -240,12 +240,14 @@ def run_scaling(body, quick: bool, say: Say) -> dict:
     bodies = []
     levels = [("decimated 3 cm", 0.03), ("decimated 1.5 cm", 0.015), ("as built", None)]
     if not quick:
-        levels.append(("subdivided once", "sub"))
+        levels += [("subdivided once", "sub"), ("subdivided twice", "sub2")]
     for label, how in levels:
         if how is None:
             b = body
-        elif how == "sub":
+        elif how in ("sub", "sub2"):
             v, f = trimesh.remesh.subdivide(body.vertices, body.faces)
+            if how == "sub2":
+                v, f = trimesh.remesh.subdivide(v, f)
             seg = None
             if body.segments is not None:  # new midpoints take a neighbour's label
                 from scipy.spatial import cKDTree
@@ -277,7 +279,7 @@ def _static_track(body, fps: float = 30.0):
 
 
 def run_stability(body, quick: bool, say: Say) -> dict:
-    """The coarse skirt (3 cm) is dressed once (cotton); each cell then runs it for 0.4 s with
+    """The coarse skirt (3 cm) is dressed once (cotton); each cell then runs it for 0.3 s with
     the cell's stiffness (x the simulated cotton: springs and their damping scaled, the eq. 4
     bound with them), time step (x that bound) and body speed (0: standing; else walking, 0.15 s
     from rest to the full walk). Outcome: stable; refused (a clear error: a time step above the
@@ -303,7 +305,7 @@ def run_stability(body, quick: bool, say: Say) -> dict:
             for s in speeds:
                 cell = {"stiffness": k, "dt_fraction": f, "speed": s}
                 try:
-                    w = walk_cloth(body, drape, WalkOptions(seconds=0.4), texel=0.005,
+                    w = walk_cloth(body, drape, WalkOptions(seconds=0.3), texel=0.005,
                                    tol=model.params.tolerance, track=tracks[s])
                     cell.update(outcome="stable", strain_max=w.report["strain_max"],
                                 penetration_max_mm=w.report["penetration_mm"]["max"])
