@@ -72,3 +72,22 @@ def test_catalogue_quality(body, garment):
     spec, place, name = resolve_garment(garment, b, "M")
     _, rep = run_tryon(b, spec, place=place, source=name)
     _check_quality(rep)
+
+
+@pytest.mark.parametrize("collision", ["image", "object"])
+def test_coarse_skirt_quality_both_collisions(collision):
+    """The object-space baseline passes the same checks as the image-space path: a coarse catalogue
+    skirt on the default woman, sewn and draped: seams welded, no penetration past the issue's
+    limits (measured exactly), strain within the threshold + 1 %, the skirt at the waist."""
+    from engine.body.default import default_body
+    from engine.scene.garments import resolve_garment
+    from engine.scene.tryon import run_tryon
+
+    body = default_body("female")
+    spec, place, name = resolve_garment("skirt", body, "M")
+    res, rep = run_tryon(body, spec, h=0.03, collision=collision, place=place, source=name)
+    assert rep["collision"] == collision
+    assert rep["seam_gap_mm"]["max"] <= 30.0 and rep["cloth_vertices"] < rep["cloth_vertices_unsewn"]
+    assert rep["penetration_mm"]["max"] <= 3.0 and rep["penetration_mm"]["p99"] <= 1.0, rep["penetration_mm"]
+    assert rep["strain"]["max"] <= rep["strain"]["threshold"] + 0.01, rep["strain"]
+    assert 0.9 < res.positions[:, 1].max() < 1.15 and res.positions[:, 1].min() > 0.25  # hem ~0.30 m
