@@ -87,14 +87,19 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
         return JSONResponse({"error": "; ".join(parts)}, status_code=422)
 
     # --- access -------------------------------------------------------------------------
-    def owner(authorization: str | None = Header(None), token: str | None = Query(None)) -> str:
-        t = None
+    def bearer(authorization: str | None) -> str | None:
         if authorization and authorization.lower().startswith("bearer "):
-            t = authorization[7:].strip()
-        t = t or token
+            return authorization[7:].strip() or None
+        return None
+
+    def known(t: str) -> bool:
+        return t in s.tokens or db.one("SELECT token FROM tokens WHERE token=?", t) is not None
+
+    def owner(authorization: str | None = Header(None), token: str | None = Query(None)) -> str:
+        t = bearer(authorization) or token
         if not t:
             raise HTTPException(401, "no API token: send 'Authorization: Bearer <token>' (POST /api/tokens gives one)")
-        if t not in s.tokens and db.one("SELECT token FROM tokens WHERE token=?", t) is None:
+        if not known(t):
             raise HTTPException(401, "unknown API token: create one with POST /api/tokens")
         return t
 
@@ -324,10 +329,8 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
 
     # --- the live viewer (viser), relayed ------------------------------------------------
     def viewer_owner(jid: str, token: str | None, cookie: str | None, authorization: str | None = None) -> dict:
-        t = token or cookie
-        if not t and authorization and authorization.lower().startswith("bearer "):
-            t = authorization[7:].strip()
-        if not t or (t not in s.tokens and db.one("SELECT token FROM tokens WHERE token=?", t) is None):
+        t = token or cookie or bearer(authorization)
+        if not t or not known(t):
             raise HTTPException(401, "open the viewer with ?token=<your API token>")
         row = db.one("SELECT * FROM jobs WHERE id=? AND owner=?", jid, t)
         if row is None:

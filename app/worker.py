@@ -115,13 +115,9 @@ def _simulate(req, body, spec, place, name, fabric, walking, out, progress, view
     out.mkdir(parents=True, exist_ok=True)
     write_outputs(out, body, res, report, size=500)
     if walking:
-        from engine.scene.walk import WalkOptions, walk_cloth, walk_report, write_walk_outputs
+        from engine.scene.walk import WalkOptions, walk_cloth, walk_report, walking_body, write_walk_outputs
 
-        walker = body
-        if body.rig is None:  # a scan walks with the default body's skeleton fitted to it
-            from engine.body.fit import fit_rig
-
-            walker = fit_rig(body)
+        walker = walking_body(body)  # a scan walks with the default skeleton fitted to it
         w = walk_cloth(walker, res, WalkOptions(seconds=req.get("seconds", 4.0)), texel=0.005,
                        tol=res.model.params.tolerance, progress=progress, observer=view)
         report = walk_report(report, w.report)

@@ -238,7 +238,7 @@ def walk_cmd(
         from engine.scene.drape import DrapeOptions
         from engine.scene.garments import resolve_garment
         from engine.scene.tryon import run_tryon
-        from engine.scene.walk import WalkOptions, walk_cloth, walk_report, write_walk_outputs
+        from engine.scene.walk import WalkOptions, walk_cloth, walk_report, walking_body, write_walk_outputs
 
         wo = WalkOptions(seconds=seconds, fps=fps, reuse_maps=reuse_maps, velocity_mode=velocity_mode,
                          collision=collision,
@@ -254,11 +254,8 @@ def walk_cmd(
                 typer.echo(f"note: {line}", err=True)
         else:
             b = _body(body, up, front)
-        walker = b
-        if b.rig is None and track is None:  # a scan: give it the default body's skeleton and weights
-            from engine.body.fit import fit_rig
-
-            walker = fit_rig(b)
+        walker = b if track is not None else walking_body(b)
+        if walker is not b:  # a scan: the default body's skeleton and weights were fitted to it
             typer.echo(f"note: {walker.notes[-1]}", err=True)
         spec, place, name = resolve_garment(garment, b, size)
         prog, update = _progress_printer()
@@ -266,8 +263,7 @@ def walk_cmd(
             res, report = run_tryon(b, spec, fabric=fabric, h=resolution / 100.0, texel=texel / 1000.0,
                                     collision=collision, options=DrapeOptions(fabric=fabric), place=place,
                                     source=name, progress=update)
-            # (a scan is dressed as loaded, as `tryon drape` does -- measured: dressed with the
-            # fitted segment maps, the sample skirt on the sample scan was left at 17 % strain)
+            # (a scan is dressed as loaded and walks fitted: see engine.scene.walk.walking_body)
             w = walk_cloth(walker, res, wo, texel=texel / 1000.0, tol=res.model.params.tolerance,
                            progress=update, track=track)
         full = walk_report(report, w.report)

@@ -101,6 +101,12 @@ class BodyTrack:
         a = f - i
         return (1.0 - a) * self.offset(i) + a * self.offset(i + 1)
 
+    def root_velocity(self, i: int) -> np.ndarray:
+        """The root's horizontal velocity at frame i (m/s, central difference of the offsets)."""
+        if i > 0:
+            return (self.offset(i + 1) - self.offset(i - 1)) * self.fps / 2
+        return (self.offset(1) - self.offset(0)) * self.fps
+
     def vertices(self, i: int) -> np.ndarray:
         k, _ = self.index(i)
         return self.frames[k].astype(np.float64) + self.offset(i)
@@ -178,20 +184,19 @@ def pose_joints(rig: Rig, deltas: dict[str, np.ndarray]) -> np.ndarray:
     return g
 
 
-_LOCAL_CACHE: dict[int, np.ndarray] = {}
-
-
 def _local_rest(rig: Rig) -> np.ndarray:
-    key = id(rig.rest_transforms)
-    if key not in _LOCAL_CACHE:
+    """Each joint's rest transform relative to its parent (J, 4, 4), kept on the rig (computed
+    once: pose_joints is called for every pose of a walk)."""
+    cached = rig.__dict__.get("_local_rest")
+    if cached is None or cached[0] is not rig.rest_transforms:
         rest = rig.rest_transforms
         local = np.empty_like(rest)
         for j in range(len(rest)):
             p = rig.parents[j]
             local[j] = rest[j] if p < 0 else np.linalg.inv(rest[p]) @ rest[j]
-        _LOCAL_CACHE.clear()
-        _LOCAL_CACHE[key] = local
-    return _LOCAL_CACHE[key]
+        cached = (rest, local)
+        rig.__dict__["_local_rest"] = cached
+    return cached[1]
 
 
 class _Walker:

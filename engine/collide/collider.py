@@ -9,6 +9,18 @@ from engine.collide.maps import CollisionMaps
 from engine.collide.query import query_batch_serial
 
 
+def alloc_answers(collider, n: int) -> None:
+    """The map query's output buffers for n points, as attributes of `collider` (reused between
+    steps; query_batch_serial / query_point_into write them)."""
+    collider.status = np.zeros(n, np.int8)
+    collider.surface = np.zeros((n, 3))
+    collider.depth = np.zeros(n)
+    collider.normal = np.zeros((n, 3))
+    collider.velocity = np.zeros((n, 3))
+    collider.map_index = np.zeros(n, np.int32)
+    collider._n = n
+
+
 class MapCollider:
     """Cloth points against CollisionMaps (vertex and face-midpoint checks, seed 003 §5.3).
     Output arrays are reused between calls (one call per simulation step); set_maps() swaps
@@ -25,13 +37,7 @@ class MapCollider:
         self.version += 1
 
     def _alloc(self, n: int) -> None:
-        self.status = np.zeros(n, np.int8)
-        self.surface = np.zeros((n, 3))
-        self.depth = np.zeros(n)
-        self.normal = np.zeros((n, 3))
-        self.velocity = np.zeros((n, 3))
-        self.map_index = np.zeros(n, np.int32)
-        self._n = n
+        alloc_answers(self, n)
 
     def query(self, points: np.ndarray):
         if points.shape[0] != self._n:

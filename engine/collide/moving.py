@@ -33,6 +33,7 @@ import numpy as np
 
 from engine.body.motion import BodyTrack
 from engine.body.types import Body
+from engine.collide.collider import alloc_answers
 from engine.collide.maps import CollisionMaps, MapRenderer
 from engine.collide.query import query_point_into
 from engine.jit import serial_kernel
@@ -144,8 +145,7 @@ class TrackCollider:
                 self.maps.surf = self.maps.vel = None  # the float16 copies are kept
             self.maps = self._frame_maps(k)
             self._k = k
-            self._root_v = (tr.offset(i + 1) - tr.offset(i - 1)) * tr.fps / 2 if i > 0 else \
-                (tr.offset(1) - tr.offset(0)) * tr.fps
+            self._root_v = tr.root_velocity(i)
             rel = tr.vel[k].astype(np.float64) - self._root_v
             self._vmax = float(np.sqrt(np.einsum("ij,ij->i", rel, rel).max()))
             self._k_serial += 1  # answers from other maps are not carried over
@@ -155,12 +155,7 @@ class TrackCollider:
         self.version += 1  # every step: the body moves
 
     def _alloc(self, n: int) -> None:
-        self.status = np.zeros(n, np.int8)
-        self.surface = np.zeros((n, 3))
-        self.depth = np.zeros(n)
-        self.normal = np.zeros((n, 3))
-        self.velocity = np.zeros((n, 3))
-        self.map_index = np.zeros(n, np.int32)
+        alloc_answers(self, n)
         self.local = np.zeros((n, 3))
         # each point's last map answer: where (root frame), when, from which maps, penetration
         # then and the surface's normal speed relative to the root
@@ -169,7 +164,6 @@ class TrackCollider:
         self.c_frame = np.full(n, -1, np.int64)
         self.c_pen = np.zeros(n)
         self.c_un = np.zeros(n)
-        self._n = n
 
     def query(self, points: np.ndarray):
         if points.shape[0] != self._n:
@@ -230,8 +224,7 @@ class TrackObjectCollider:
             self.stats["map_seconds"] += time.perf_counter() - t0  # (the refit stands in for maps)
             self.stats["renders"] += 1
             self._k = k
-        self._root_v = (tr.offset(i + 1) - tr.offset(i - 1)) * tr.fps / 2 if i > 0 else \
-            (tr.offset(1) - tr.offset(0)) * tr.fps
+            self._root_v = tr.root_velocity(i)
         self._shift_t = t - i / tr.fps
         self._offset = tr.offset_at(t)
         self.version += 1

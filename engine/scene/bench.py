@@ -17,7 +17,6 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import replace
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -175,9 +174,9 @@ def _decimate(vertices, faces, cell: float, segments=None):
     np.add.at(v, inv, vertices)
     v /= cnt[:, None]
     f = inv[faces]
-    ok = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
-    f = np.unique(np.sort(f[ok], axis=1), axis=0, return_index=True)[1]
-    f = inv[faces][ok][np.sort(f)]
+    f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]  # collapsed triangles out
+    _, first = np.unique(np.sort(f, axis=1), axis=0, return_index=True)  # duplicates out, order kept
+    f = f[np.sort(first)]
     seg = None if segments is None else segments[rep]
     return v, f.astype(np.int32), seg
 

@@ -75,6 +75,17 @@ class WalkResult:
     report: dict
 
 
+def walking_body(body: Body) -> Body:
+    """The body to walk: a scan (no rig) gets the default body's skeleton and weights fitted to it
+    (engine.body.fit); a rigged body walks as it is. The scan is dressed as loaded (dressed with
+    the fitted segment maps, the sample skirt on the sample scan was left at 17 % strain)."""
+    if body.rig is not None:
+        return body
+    from engine.body.fit import fit_rig
+
+    return fit_rig(body)
+
+
 def walk_segments(body: Body, track: BodyTrack, garment_top: float) -> tuple[list[str] | None, list[str]]:
     """Segment maps for a walk: every limb the garment can meet while walking (the arms swing
     down past the hips, so unlike a standing skirt a walking one needs them), the head only when
@@ -115,33 +126,30 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
     if track is None:
         track = walk_track(body, o.walk, o.fps)
     left = list(track.notes)
-    top = float(drape.positions[:, 1].max())
-    segs, seg_left = walk_segments(body, track, top)
-    left += seg_left
-    window = (0.0, min(float(track.frames[:, :, 1].max()), top + 0.15))
-    renderer = None
-    if o.collision == "image":
-        renderer = MapRenderer(body.faces, segments=body.segments, segment_names=segs, texel=texel, tol=tol,
-                               window=window, with_velocity=True)
     n_frames = int(round(o.seconds * track.fps))
     if not track.periodic and n_frames > len(track.frames) - 1:
         n_frames = len(track.frames) - 1
         left.append(f"walking past {n_frames / track.fps:.2f} s, because the animation ends there")
-    if track.periodic and o.reuse_maps:
-        distinct = min(n_frames + 1, len(track.frames))
-        left.append(f"maps of frames after the first cycle, because the walk is periodic: {distinct} frames "
-                    f"of maps rendered once (ramp {track.cycle_start} + cycle {track.cycle_frames}) and reused "
-                    "for all " f"{n_frames + 1} frames (float16 copies)")
-    else:
-        left.append("nothing: the motion is not periodic, so maps are rendered for every frame")
+    renderer = None
     if o.collision == "object":
         from engine.collide.moving import TrackObjectCollider
 
-        left = [ln for ln in left if not ln.startswith(("maps of frames", "nothing: the motion", "head maps",
-                                                        "arm maps"))]
         left.append("collision maps, because object-space collision (a BVH refitted every frame) was chosen")
         collider = TrackObjectCollider(track, tol=tol)
     else:
+        top = float(drape.positions[:, 1].max())
+        segs, seg_left = walk_segments(body, track, top)
+        left += seg_left
+        window = (0.0, min(float(track.frames[:, :, 1].max()), top + 0.15))
+        renderer = MapRenderer(body.faces, segments=body.segments, segment_names=segs, texel=texel, tol=tol,
+                               window=window, with_velocity=True)
+        if track.periodic and o.reuse_maps:
+            distinct = min(n_frames + 1, len(track.frames))
+            left.append(f"maps of frames after the first cycle, because the walk is periodic: {distinct} frames "
+                        f"of maps rendered once (ramp {track.cycle_start} + cycle {track.cycle_frames}) and "
+                        f"reused for all {n_frames + 1} frames (float16 copies)")
+        else:
+            left.append("nothing: the motion is not periodic, so maps are rendered for every frame")
         collider = TrackCollider(track, renderer, tol=tol, keep=track.periodic and o.reuse_maps)
     model = drape.model
     from dataclasses import replace
@@ -157,6 +165,7 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
     frames = np.empty((n_frames + 1, model.n, 3), np.float32)
     frames[0] = state.x
     per_frame, depths = [], []
+    exact = None  # BVH of the body for the exact penetration check
     lo, hi = body.vertices.min(axis=0), body.vertices.max(axis=0)
     t_maps = t_cloth = t_coll = t_pen = 0.0
     t_walk0 = time.perf_counter()
@@ -184,7 +193,11 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
             frames[i] = x
             tp = time.perf_counter()
             bv = track.vertices(i)
-            sd = MeshBVH(bv, body.faces).signed_distance(x)  # exact, against this frame's mesh
+            if exact is None:
+                exact = MeshBVH(bv, body.faces)
+            else:
+                exact.update(bv)  # same topology: refit
+            sd = exact.signed_distance(x)  # exact, against this frame's mesh
             depth = np.where(sd < 0.0, -sd, 0.0)
             depths.append(depth.astype(np.float32))
             t_pen += time.perf_counter() - tp
