@@ -213,7 +213,7 @@ def walk_cmd(
     size: Optional[str] = typer.Option(None, "--size", help="Catalogue size: XS, S, M, L, XL, XXL (default M)."),
     fabric: str = typer.Option("cotton", "--fabric", help="cotton, denim, silk or jersey."),
     seconds: float = typer.Option(4.0, "--seconds", help="How long to walk (s), after dressing."),
-    fps: float = typer.Option(30.0, "--fps", help="Body frames (and output frames) per second."),
+    fps: float = typer.Option(30.0, "--fps", help="Body frames (and output frames) per second; an uploaded .zip of OBJ frames plays at this rate, an animated .glb is sampled at it."),
     speed: float = typer.Option(1.2, "--speed", help="Walking speed in m/s (1.2 is a normal walk)."),
     stride: Optional[float] = typer.Option(None, "--stride", help="Stride (two steps) in m; default 0.82 x height."),
     in_place: bool = typer.Option(False, "--in-place", help="Walk on the spot (a treadmill) instead of forward."),
@@ -231,7 +231,8 @@ def walk_cmd(
 ):
     """Dress a body (as `tryon drape`), then walk it: write anim.glb (plays in any glTF viewer),
     strip.png (frames side by side) and report.json. BODY may also be an animation: a .zip of OBJ
-    frames (one mesh topology) played at --fps; the garment is dressed on its first frame."""
+    frames (one mesh topology) played at --fps, or a .glb with a morph-target or skinned animation
+    sampled at --fps; the garment is dressed on its first frame."""
 
     def go():
         from engine.body.motion import WalkParams
@@ -245,7 +246,9 @@ def walk_cmd(
                          walk=WalkParams(speed=speed, stride=stride, in_place=in_place))
         wo.validate()  # refuse before dressing
         track = None
-        if body.lower().endswith(".zip"):  # an uploaded animation: its own motion, at --fps
+        from engine.body.gltf_anim import has_animation
+
+        if body.lower().endswith(".zip") or has_animation(body):  # an uploaded animation: its own motion
             from engine.body.animation import load_animation
 
             track = load_animation(Path(body), fps, up=up, front=front)

@@ -1,8 +1,10 @@
-"""An uploaded animated body: a zip of OBJ frames (one topology) at a stated frame rate -> BodyTrack.
+"""An uploaded animated body at a stated frame rate -> BodyTrack: a zip of OBJ frames (one
+topology), or a glTF 2.0 file (.glb) with morph-target or skinned animation.
 
     track = load_animation("walk.zip", fps=30)
+    track = load_animation("walk.glb", fps=30)     # sampled at 1/30 s (engine.body.gltf_anim)
 
-Frames are the zip's .obj entries in name order (frame_000.obj, frame_001.obj, ...). The first
+Zip frames are the zip's .obj entries in name order (frame_000.obj, frame_001.obj, ...). The first
 frame is loaded as a scan (engine.body.load: units, axes, repairs) and the same transform is
 applied to every frame, so the body keeps its motion through the room; vertices the repair
 dropped or merged are mapped by position in the first frame. Velocities are central
@@ -30,9 +32,26 @@ def load_animation(path: str | Path, fps: float, up: str | None = None, front: s
     path = Path(path)
     if not (5.0 <= fps <= 240.0):
         raise InputError(f"frame rate {fps} is out of range (5 .. 240 frames per second)")
+    if not path.is_file():
+        raise InputError(f"animation file not found: {path}")
+    if path.suffix.lower() in (".glb", ".gltf"):
+        from engine.body.gltf_anim import sample_gltf_animation
+
+        frames_raw, faces0, notes = sample_gltf_animation(path, fps)
+        if len(frames_raw) > MAX_FRAMES:
+            raise InputError(f"{path.name} gives {len(frames_raw)} frames at {fps:g} fps, more than {MAX_FRAMES}: "
+                             "shorten the animation")
+        with tempfile.TemporaryDirectory() as tmp:
+            p0 = Path(tmp) / "frame0.obj"  # the first frame is loaded as a scan (units, axes, repairs)
+            with open(p0, "w") as fh:
+                fh.write("".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in frames_raw[0].tolist()))
+                fh.write("".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces0.tolist()))
+            first = load_body_file(p0, up=up, front=front)
+        names = [f"{path.name} frame {k}" for k in range(len(frames_raw))]
+        return _track(path, first, list(frames_raw), names, fps, notes)
     if not zipfile.is_zipfile(path):
         raise InputError(f"{path.name} is not a zip file: an animated body is a zip of OBJ frames (one per frame, "
-                         "same vertices in the same order)")
+                         "same vertices in the same order) or a .glb with an animation")
     with zipfile.ZipFile(path) as z, tempfile.TemporaryDirectory() as tmp:
         names = sorted(n for n in z.namelist() if n.lower().endswith(".obj") and not n.endswith("/"))
         if len(names) < 2:
@@ -53,6 +72,12 @@ def load_animation(path: str | Path, fps: float, up: str | None = None, front: s
                 raise InputError(f"frame '{n}' has {len(v)} vertices / {len(f)} triangles, the first frame "
                                  f"{len(raw0)} / {len(faces0)}: every frame needs the same mesh topology")
             frames_raw.append(v)
+    return _track(path, first, frames_raw, names, fps, [])
+
+
+def _track(path: Path, first: Body, frames_raw: list, names: list[str], fps: float, notes: list[str]) -> BodyTrack:
+    """The frames (file coordinates) moved like the first frame was when it was loaded as a scan."""
+    raw0 = frames_raw[0]
     a = first.to_world
     world0 = raw0 @ a[:3, :3].T + a[:3, 3]
     from scipy.spatial import cKDTree
@@ -76,7 +101,7 @@ def load_animation(path: str | Path, fps: float, up: str | None = None, front: s
                          "frames out of order?")
     body = Body(vertices=frames[0].astype(np.float64), faces=first.faces, name=path.stem, notes=list(first.notes),
                 to_world=first.to_world)
-    notes = [f"animation: {len(frames)} frames at {fps:g} fps ({(len(frames) - 1) / fps:.2f} s) from {path.name}"]
+    notes = notes + [f"animation: {len(frames)} frames at {fps:g} fps ({(len(frames) - 1) / fps:.2f} s) from {path.name}"]
     try:
         from engine.body.fit import fit_rig
 
