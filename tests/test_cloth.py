@@ -410,7 +410,7 @@ class _CountingCollider:
 
 def test_solver_requeries_when_the_body_moves_or_points_travel(garment):
     m = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
-                    get_fabric("cotton"), H, ClothParams(requery_every=8, requery_move=0.001))
+                    get_fabric("cotton"), H, ClothParams(requery_every=8, requery_move=0.001, collide_every=1))
     x = garment.positions.copy()
     x[:, 1] += 0.5 - x[:, 1].min()  # unstretched, at rest, far above the floor: answers are reused
     s = ClothSolver(m, _CountingCollider(), gravity=np.zeros(3))
@@ -430,7 +430,7 @@ def test_solver_requeries_when_the_body_moves_or_points_travel(garment):
     # a clear point heading for the floor is asked again before it gets 0.5 mm into the band,
     # even when `requery_move` alone would wait (1 cm here)
     m2 = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
-                     get_fabric("cotton"), H, ClothParams(requery_every=8, requery_move=0.01))
+                     get_fabric("cotton"), H, ClothParams(requery_every=8, requery_move=0.01, collide_every=1))
     s2 = ClothSolver(m2, _CountingCollider(), gravity=np.zeros(3))
     x2 = garment.positions.copy()
     x2[:, 1] += 0.0055 - x2[:, 1].min()  # 0.5 mm above the band
@@ -439,3 +439,29 @@ def test_solver_requeries_when_the_body_moves_or_points_travel(garment):
     for _ in range(4):
         s2.step(st)
     assert s2.collider.calls >= 2
+
+
+def test_collisions_every_few_steps_still_stop_a_falling_sheet(garment):
+    """collide_every=4: the floor is asked every 4th step with the points predicted 4 steps ahead,
+    and the reaction force holds contacts in between -- a sheet thrown at the floor at 2 m/s stops
+    in the tolerance band, as with a check every step; a bad setting is refused."""
+    lowest = {}
+    for every in (1, 4):
+        m = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
+                        get_fabric("cotton"), H, ClothParams(collide_every=every, requery_every=1))
+        s = ClothSolver(m, _CountingCollider())
+        x = garment.positions.copy()
+        x[:, 1] += 0.02 - x[:, 1].min()
+        st = ClothState(x, np.zeros_like(x))
+        st.v[:] = [0.0, -2.0, 0.0]
+        low = np.inf
+        for _ in range(400):
+            s.step(st)
+            low = min(low, float(st.x[:, 1].min()))
+        assert s.collider.calls == 400 // every
+        lowest[every] = low
+    assert lowest[1] > 0.0 and lowest[4] > 0.0, lowest  # never below the floor (the band is 0 .. 5 mm)
+    assert abs(lowest[4] - lowest[1]) < 0.002
+    with pytest.raises(InputError, match="collide_every"):
+        build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
+                    get_fabric("cotton"), H, ClothParams(collide_every=0))

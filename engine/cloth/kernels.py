@@ -32,18 +32,22 @@ VM_MODES = {"zero": VM_ZERO, "average": VM_AVERAGE, "directional": VM_DIRECTIONA
 
 @serial_kernel
 def eval_forces_and_integrate(x, v, inv_mass, mass, springs, rest, k, spring_c, gravity, damping,
-                              contact, contact_n, mu, dt, f_out):
+                              contact, contact_n, mu, dt, f_out, active, threshold, work):
     """Springs (eq. 2) with damping along each spring (spring_c, N.s/m) -- one pass over the
     springs, each adding its force to both ends (serial, so the scatter is race-free and every
     length is computed once) -- gravity, viscous damping, then the reaction force of seed 000
     eq. 16 where the vertex touched the body in the previous step (cancel the force into the
     body, Coulomb friction on the tangential part), then the velocity half of eq. 3:
-    v += dt f / m. f_out keeps the force for diagnostics."""
+    v += dt f / m. f_out keeps the force for diagnostics.
+    The same pass lists the active springs longer than (1 + threshold) x rest in `work` and
+    returns their count: the velocity modification that follows (modify_velocities with
+    n_known) needs no sweep of its own, as positions do not move in between."""
     n = x.shape[0]
     for i in range(n):
         f_out[i, 0] = mass[i] * gravity[0] - damping * mass[i] * v[i, 0]
         f_out[i, 1] = mass[i] * gravity[1] - damping * mass[i] * v[i, 1]
         f_out[i, 2] = mass[i] * gravity[2] - damping * mass[i] * v[i, 2]
+    n_act = 0
     for s in range(springs.shape[0]):
         a = springs[s, 0]
         b = springs[s, 1]
@@ -51,6 +55,9 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, springs, rest, k, spring_c, 
         dy = x[b, 1] - x[a, 1]
         dz = x[b, 2] - x[a, 2]
         length = np.sqrt(dx * dx + dy * dy + dz * dz)
+        if active[s] and length > (1.0 + threshold) * rest[s]:
+            work[n_act] = s
+            n_act += 1
         if length > 1e-12:
             # spring force plus damping of the spring's rate of stretch (along the spring)
             rate = ((v[b, 0] - v[a, 0]) * dx + (v[b, 1] - v[a, 1]) * dy + (v[b, 2] - v[a, 2]) * dz) / length
@@ -81,6 +88,7 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, springs, rest, k, spring_c, 
         v[i, 0] += w * fx
         v[i, 1] += w * fy
         v[i, 2] += w * fz
+    return n_act
 
 
 @serial_kernel

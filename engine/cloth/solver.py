@@ -66,6 +66,7 @@ class ClothSolver:
         self.last_hits = 0
         self.strain_guard = p.strain_guard  # the drape turns it off while sewing
         self.recover = p.recover  # ... and the strain recovery (it would fight the seam pull)
+        self.collide_every = p.collide_every  # ... and checks collisions every step
         self.sewing = None  # (pairs, welded, tau, vmax) while sewing: see engine.cloth.welds
         self._q, self._q_age, self._q_version = None, 0, None  # the last map answer (see _contacts)
 
@@ -74,24 +75,27 @@ class ClothSolver:
         m, p, dt = self.model, self.model.params, self.dt
         recover = max(self.recover, dt)  # work an excess off over at least one step (no overshoot)
         t0 = time.perf_counter()
-        # forces (eq. 2, gravity, damping, reaction eq. 16) and v += dt a (eq. 3)
-        K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, m.springs, m.rest, m.stiffness, m.spring_c,
-                                    self.gravity * gravity_scale,
-                                    p.damping * damping_scale,
-                                    self.contact, self.contact_n, m.fabric.friction * friction_scale, dt, self.f)
+        # forces (eq. 2, gravity, damping, reaction eq. 16) and v += dt a (eq. 3); the same pass
+        # lists the over-elongated springs for the velocity modification
+        n_over = K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, m.springs, m.rest, m.stiffness,
+                                             m.spring_c, self.gravity * gravity_scale, p.damping * damping_scale,
+                                             self.contact, self.contact_n, m.fabric.friction * friction_scale, dt,
+                                             self.f, self.active, m.fabric.strain_threshold, self.vm_work)
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 §3)
         n_act = K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
                                     self.mode, self.gravity * gravity_scale, dt, self.body_v, p.vm_passes,
-                                    self.vm_work, recover)
+                                    self.vm_work, recover, n_over)
         if self.sewing is not None:
             # sewing has priority over the strain limit (it stretches cloth near a seam by
             # design; the drape's strain recovery relaxes that), but not over the collision below
             pairs, welded, tau, vmax = self.sewing
             pull_seams(state.x, state.v, m.mass, pairs, welded, tau, vmax, self.contact, self.contact_n)
         t1 = time.perf_counter()
-        # collision detection and response (vertices and face midpoints, eq. 12/15)
-        if self.collider is not None:
-            K.collision_points(state.x, state.v, dt, m.quads, m.tris, self.points, self.point_v)
+        # collision detection and response (vertices and face midpoints, eq. 12/15) every
+        # `collide_every` steps, the points predicted that many steps ahead; in between the
+        # reaction force (eq. 16, in the force pass) keeps contacts from pressing in
+        if self.collider is not None and self.iterations % self.collide_every == 0:
+            K.collision_points(state.x, state.v, dt * self.collide_every, m.quads, m.tris, self.points, self.point_v)
             status, normal, bvel, depth = self._contacts()
             # The body's push and the strain limit can disagree (a waistband sliding down the hips
             # is pushed outward while it may not stretch): alternate the two velocity changes a
