@@ -33,7 +33,8 @@ MAX_SECONDS = 120.0
 
 
 class _File:
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, buffers: bool = True):
+        """buffers=False: the JSON only (enough to see whether the file is animated)."""
         self.name = path.name
         raw = path.read_bytes()
         if raw[:4] == b"glTF":
@@ -46,7 +47,7 @@ class _File:
             self.bin = None
         if not isinstance(self.doc, dict) or not str(self.doc.get("asset", {}).get("version", "")).startswith("2"):
             raise InputError(f"{self.name}: only glTF 2.0 files are read")
-        self.buffers = [self._buffer(i, b) for i, b in enumerate(self.doc.get("buffers", []))]
+        self.buffers = [self._buffer(i, b) for i, b in enumerate(self.doc.get("buffers", []))] if buffers else []
         self._acc_cache: dict[int, np.ndarray] = {}
 
     def _glb(self, raw: bytes):
@@ -189,7 +190,7 @@ def has_animation(path: str | Path) -> bool:
     if path.suffix.lower() not in (".glb", ".gltf") or not path.is_file():
         return False
     try:
-        return bool(_File(path).doc.get("animations"))
+        return bool(_File(path, buffers=False).doc.get("animations"))
     except InputError:
         return False
 

@@ -49,7 +49,7 @@ class ClothParams:
     vm_passes: int = 12  # Gauss-Seidel passes (over the over-elongated springs) per step
     contact_rounds: int = 4  # alternations of strain limit and collision response per step
     collide_every: int = 1  # steps between collision checks (see ClothSolver.step). The drape checks
-    # every step: measured, every 2 or 4 steps left the shirt's sleeves at 6.1-6.3 % strain (limit
+    # every step: measured, every 2 or 4 steps left the shirt at 6.1-6.3 % strain (limit
     # 6 %); walking checks every 4 (engine.scene.walk.WalkOptions)
     recover: float = 0.002  # s: a spring's excess over the strain limit is worked off over this long
     requery_move: float = 0.001  # m: the maps are asked again once a checked point moved this far ...

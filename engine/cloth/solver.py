@@ -66,7 +66,6 @@ class ClothSolver:
         self.last_hits = 0
         self.strain_guard = p.strain_guard  # the drape turns it off while sewing
         self.recover = p.recover  # ... and the strain recovery (it would fight the seam pull)
-        self.collide_every = p.collide_every  # ... and checks collisions every step
         self.sewing = None  # (pairs, welded, tau, vmax) while sewing: see engine.cloth.welds
         self._q, self._q_age, self._q_version = None, 0, None  # the last map answer (see _contacts)
 
@@ -94,8 +93,8 @@ class ClothSolver:
         # collision detection and response (vertices and face midpoints, eq. 12/15) every
         # `collide_every` steps, the points predicted that many steps ahead; in between the
         # reaction force (eq. 16, in the force pass) keeps contacts from pressing in
-        if self.collider is not None and self.iterations % self.collide_every == 0:
-            K.collision_points(state.x, state.v, dt * self.collide_every, m.quads, m.tris, self.points, self.point_v)
+        if self.collider is not None and self.iterations % p.collide_every == 0:
+            K.collision_points(state.x, state.v, dt * p.collide_every, m.quads, m.tris, self.points, self.point_v)
             status, normal, bvel, depth = self._contacts()
             # The body's push and the strain limit can disagree (a waistband sliding down the hips
             # is pushed outward while it may not stretch): alternate the two velocity changes a

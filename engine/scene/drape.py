@@ -111,7 +111,6 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
         tri0 = _triangles(model) if observer is not None else None
         solver.strain_guard = None  # sewing stretches cloth by design; the guard and the strain
         solver.recover = 1e9  # recovery are for the drape (a new solver is made after welding)
-        solver.collide_every = 1  # seams are pulled through tight places: checked every step
         solver.sewing = (pairs, welded, o.sew_tau, o.sew_vmax)
         for it in range(budget):
             g = o.sew_gravity * min(1.0, (it + 1) * dt / o.gravity_ramp)  # let the seams catch first

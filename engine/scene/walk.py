@@ -52,7 +52,8 @@ class WalkOptions:
     # force holds contacts in between). The eq. 4 step is set by the stiffest spring, not by
     # contact: a point moving 1 m/s travels 0.46 mm in 4 steps of 0.115 ms, a tenth of the band.
     # Measured on the dress (4374 vertices, 2 s): every step 503 ms a frame, penetration max
-    # 0.6 mm, strain 7.7 %; every 4 steps 311 ms, 1.7 mm, 6.4 %; every 8 steps 221 ms, 5.3 mm.
+    # 0.6 mm, strain 7.7 %; every 4 steps 311 ms, 1.7 mm, 6.4 %; every 8 steps (with 2 contact
+    # rounds, 4 s) 221 ms, 5.3 mm.
     collide_every: int = 4
     collision: str = "image"  # or "object": the BVH baseline (engine.collide.moving.TrackObjectCollider)
 
