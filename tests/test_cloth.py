@@ -11,7 +11,7 @@ import pytest
 from engine.cloth import kernels as K
 from engine.cloth.fabrics import FABRICS, get_fabric
 from engine.cloth.model import (FLEXION, MASS_FLOOR, SHEAR, STRUCTURAL, ClothParams, ClothState, build_model,
-                               lumped_mass)
+                               lumped_mass, weld_model)
 from engine.cloth.solver import GRAVITY, ClothSolver
 from engine.cloth.welds import merge_map, pull_seams
 from engine.errors import InputError
@@ -465,3 +465,24 @@ def test_collisions_every_few_steps_still_stop_a_falling_sheet(garment):
     with pytest.raises(InputError, match="collide_every"):
         build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
                     get_fabric("cotton"), H, ClothParams(collide_every=0))
+
+
+def test_weld_keeps_the_longer_rest_of_an_eased_seam():
+    """Two one-quad panels stitched along edges of 10 and 11 mm: the welded seam spring takes the
+    longer rest (the long side is eased in; the short rest would hold it stretched 10 % for good),
+    masses add up, and springs that are not duplicated keep their own rest lengths."""
+    uv = np.array([[0, 0], [0.010, 0], [0.010, 0.010], [0, 0.010],  # panel A: 10 mm top edge 3-2
+                   [0, 0.02], [0.011, 0.02], [0.011, 0.03], [0, 0.03]])  # panel B: 11 mm bottom edge 4-5
+    quads = np.array([[0, 1, 2, 3], [4, 5, 6, 7]], dtype=np.int32)
+    panel = np.array([0, 0, 0, 0, 1, 1, 1, 1])
+    lattice = np.full((8, 2), -1)
+    seams = np.array([[3, 4], [2, 5]], dtype=np.int32)
+    m = build_model(uv, panel, lattice, quads, np.zeros((0, 3), np.int32), seams, get_fabric("cotton"), 0.01)
+    vmap = merge_map(m.n, seams.astype(np.int64))
+    w = weld_model(m, vmap)
+    assert w.n == 6 and np.isclose(w.mass.sum(), m.mass.sum())
+    rest = {tuple(sorted(p)): r for p, r in zip(w.springs.tolist(), w.rest)}
+    assert np.isclose(rest[tuple(sorted((vmap[3], vmap[2])))], 0.011)
+    assert np.isclose(rest[tuple(sorted((vmap[0], vmap[1])))], 0.010)  # A's bottom edge
+    assert np.isclose(rest[tuple(sorted((vmap[6], vmap[7])))], 0.011)  # B's top edge
+    assert len(rest) == len(w.springs)  # no duplicate springs left

@@ -218,7 +218,8 @@ def _assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, 
 
 def weld_model(model: ClothModel, vertex_map: np.ndarray) -> ClothModel:
     """Merge vertices (sewn seam pairs): vertex_map (N,) -> new index. Springs keep their rest
-    lengths from the flat pattern; duplicates (a spring present on both panels) are dropped;
+    lengths from the flat pattern; duplicates (a spring present on both panels) are merged into
+    one with the longer rest length;
     masses add up; seams are gone (they are now shared vertices)."""
     n_new = int(vertex_map.max()) + 1
     mass = np.zeros(n_new)
@@ -227,8 +228,15 @@ def weld_model(model: ClothModel, vertex_map: np.ndarray) -> ClothModel:
     keep = s[:, 0] != s[:, 1]
     s, rest, k, kind = s[keep], model.rest[keep], model.stiffness[keep], model.kind[keep]
     key = np.sort(s, axis=1)
-    _, first = np.unique(key, axis=0, return_index=True)
-    first = np.sort(first)
-    return _assemble(mass, s[first].astype(np.int32), rest[first], k[first], kind[first],
+    _, first, group = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    # a spring on both sides of a seam keeps the longer rest length: where the two stitched edges
+    # differ in length (eased in, up to the 10 % the validation allows), the shorter rest would
+    # hold the seam at the short edge's length and leave the long side's springs along the seam
+    # stretched past the strain limit for good (measured: 7.7 % on the sample skirt's waist)
+    longest = np.full(len(first), -np.inf)
+    np.maximum.at(longest, group.ravel(), rest)
+    order = np.argsort(first)
+    first, longest = first[order], longest[order]
+    return _assemble(mass, s[first].astype(np.int32), longest, k[first], kind[first],
                      vertex_map[model.quads].astype(np.int32), vertex_map[model.tris].astype(np.int32),
                      np.zeros((0, 2), np.int32), model.fabric, model.params, model.edge_length)
