@@ -10,7 +10,7 @@ import pytest
 
 from engine.cloth import kernels as K
 from engine.cloth.fabrics import FABRICS, get_fabric
-from engine.cloth.model import (FLEXION, MASS_FLOOR, SHEAR, STRUCTURAL, ClothParams, ClothState, build_model,
+from engine.cloth.model import (FLEXION, MASS_FLOOR, MASS_SCALE_PERCENTILE, SHEAR, STRUCTURAL, ClothParams, ClothState, build_model,
                                lumped_mass, weld_model)
 from engine.cloth.solver import GRAVITY, ClothSolver
 from engine.cloth.welds import merge_map, pull_seams
@@ -99,8 +99,15 @@ def test_mass_is_density_times_area(garment, fabric):
     assert lumped.sum() == pytest.approx(exact, rel=1e-9)  # faces share their mass exactly
     # the floor lifts the outline's sliver vertices: a little extra mass (2.0 % on this small
     # square at h = 2 cm, where the four corners carry 1/6 of a median vertex each)
-    np.testing.assert_allclose(m.mass, np.maximum(lumped, MASS_FLOOR * np.median(lumped)))
-    assert exact <= m.mass.sum() <= exact * 1.021
+    floored = np.maximum(lumped, MASS_FLOOR * np.median(lumped))
+    # ... and mass scaling lifts the points whose m / K is below the 5th percentile up to it
+    k_at = np.bincount(m.springs[:, 0], m.stiffness, m.n) + np.bincount(m.springs[:, 1], m.stiffness, m.n)
+    target = np.percentile(floored / k_at, MASS_SCALE_PERCENTILE)
+    np.testing.assert_allclose(m.mass, np.maximum(floored, target * k_at))
+    lifted = m.mass > floored * (1 + 1e-12)
+    assert lifted.sum() <= 0.05 * m.n + 1  # (none on this regular square: its lightest m / K are tied)
+    assert np.isclose((m.mass / k_at).min(), target)
+    assert exact <= m.mass.sum() <= exact * 1.03
     np.testing.assert_allclose(m.inv_mass * m.mass, 1.0)
 
 
@@ -486,3 +493,25 @@ def test_weld_keeps_the_longer_rest_of_an_eased_seam():
     assert np.isclose(rest[tuple(sorted((vmap[0], vmap[1])))], 0.010)  # A's bottom edge
     assert np.isclose(rest[tuple(sorted((vmap[6], vmap[7])))], 0.011)  # B's top edge
     assert len(rest) == len(w.springs)  # no duplicate springs left
+
+
+def test_mass_scaling_on_a_catalogue_dress_lengthens_the_step_for_little_mass():
+    """The catalogue dress at 1.5 cm (sliver points on clipped outlines, stiff spring stars):
+    mass scaling lifts at most 5 % of the points, adds under 1 % of the weight, and lengthens
+    the eq. 4 step by over 10 % against the same model without it."""
+    from engine.body.default import default_body
+    from engine.scene.garments import resolve_garment
+    from engine.scene.tryon import spec_placement
+
+    body = default_body("female")
+    spec, place, name = resolve_garment("dress", body, "M")
+    g = build_garment(spec, h=0.015, place=place or spec_placement(spec, body.to_world), source=name)
+    fab = get_fabric("cotton")
+    m = build_model(g.uv, g.panel, g.lattice, g.quads, g.tris, g.seams, fab, 0.015)
+    lumped = lumped_mass(g.uv, g.quads, g.tris, fab.density)
+    floored = np.maximum(lumped, MASS_FLOOR * np.median(lumped))
+    k_at = np.bincount(m.springs[:, 0], m.stiffness, m.n) + np.bincount(m.springs[:, 1], m.stiffness, m.n)
+    unscaled_dt = 0.4 * np.pi * np.sqrt(np.min(floored / k_at))
+    assert (m.mass > floored * (1 + 1e-12)).mean() <= 0.05
+    assert m.mass.sum() <= floored.sum() * 1.01
+    assert m.dt_bound >= 1.1 * unscaled_dt

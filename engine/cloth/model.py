@@ -15,7 +15,10 @@ tests/test_cloth.py).
 Eq. 4 assumes equal point masses; lumped masses along a clipped outline can be much smaller
 (sliver triangles), so every point gets at least MASS_FLOOR x the median mass -- a fraction
 of the garment's weight (measured: +1.2 % on the sample skirt at 1.5 cm, +2.4 % at 3 cm) --
-rather than letting slivers dictate the step.
+rather than letting slivers dictate the step. Then the points whose m / K lies below the 5th
+percentile get the mass that brings them up to it (selective mass scaling, as explicit
+structural codes do): measured on the catalogue at 1.5 cm, +0.04-0.6 % of the garment's weight
+for a step 1.03-1.28 x longer.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from engine.errors import InputError
 STRUCTURAL, SHEAR, FLEXION = 0, 1, 2
 EQ4_FACTOR = 0.4 * np.pi
 MASS_FLOOR = 0.5
+MASS_SCALE_PERCENTILE = 5.0
 
 
 @dataclass(frozen=True)
@@ -198,8 +202,12 @@ def spring_stiffness(kind: np.ndarray, fabric: Fabric, params: ClothParams, h: f
 
 def _assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, h) -> ClothModel:
     a, b = springs[:, 0], springs[:, 1]
-    k_point = np.bincount(a, k, len(mass)) + np.bincount(b, k, len(mass))
-    dt_bound = float(EQ4_FACTOR * np.sqrt(np.min(mass / np.maximum(k_point, 1e-12))))
+    k_point = np.maximum(np.bincount(a, k, len(mass)) + np.bincount(b, k, len(mass)), 1e-12)
+    # selective mass scaling: the points whose m / K is below the MASS_SCALE_PERCENTILE-th
+    # percentile get the mass that brings them up to it, so a few light points on stiff spring
+    # stars do not set everyone's step
+    mass = np.maximum(mass, np.percentile(mass / k_point, MASS_SCALE_PERCENTILE) * k_point)
+    dt_bound = float(EQ4_FACTOR * np.sqrt(np.min(mass / k_point)))
     ptr, other, sid = csr_adjacency(len(mass), springs)
     if not (0.0 <= params.spring_damping <= 1.0):
         raise InputError(f"spring damping must be between 0 and 1 (a fraction of critical), got {params.spring_damping}")
