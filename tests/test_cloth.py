@@ -515,3 +515,20 @@ def test_mass_scaling_on_a_catalogue_dress_lengthens_the_step_for_little_mass():
     assert (m.mass > floored * (1 + 1e-12)).mean() <= 0.05
     assert m.mass.sum() <= floored.sum() * 1.01
     assert m.dt_bound >= 1.1 * unscaled_dt
+
+
+def test_strain_guard_never_pulls_a_contact_into_the_body():
+    """Provot's projection as the drape's strain guard (keep_out): an end touching the body (normal
+    +y) keeps the outward part of its move only; without keep_out it is pulled below the surface."""
+    def run(keep_out):
+        x = np.array([[0.0, 0.0, 0.0], [0.1, -0.1, 0.0]])
+        contact = np.array([True, False])
+        normal = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 0.0]])
+        n = K.provot_positions(x, np.array([[0, 1]], np.int32), np.array([0.1]), np.array([True]), 0.0,
+                               np.ones(2), 1, np.zeros(1, np.int32), keep_out, contact, normal)
+        return n, x
+    n, x = run(True)
+    assert n == 1 and x[0, 1] == 0.0 and x[0, 0] > 0.0  # slid along the surface, not into it
+    assert np.linalg.norm(x[1] - x[0]) < np.sqrt(2) * 0.1  # the spring still got shorter
+    _, x = run(False)
+    assert x[0, 1] < 0.0

@@ -54,7 +54,8 @@ def test_serial_kernels_compile_without_parallel_loops():
     W.hold_welds(state.x, state.v, m.mass, pairs, np.ones(1, np.bool_))
     W.seam_gaps(state.x, pairs, np.zeros(1))
     K.kinetic_energy(state.v, m.mass), K.max_strain(state.x, m.springs, m.rest, solver.active)
-    K.provot_positions(state.x, m.springs, m.rest, solver.active, 0.05, m.inv_mass, 2, solver.vm_work)
+    K.provot_positions(state.x, m.springs, m.rest, solver.active, 0.05, m.inv_mass, 2, solver.vm_work, False,
+                       solver.contact, solver.contact_n)
     # the map query, on empty input with the map arrays' types
     Q.query_batch_serial(np.zeros((0, 3)), 0.005, np.zeros((2, 4, 4), np.float32), np.zeros((1, 1, 4), np.float32),
                          False, np.zeros((2, 4), np.int8), np.zeros((2, 4), np.int32), np.zeros((1, 3)),

@@ -232,7 +232,10 @@ def modify_velocities(x, v, springs, rest, active, threshold, mode, gravity, dt,
 
 
 @njit(fastmath=True, cache=True, inline="always")
-def _project_one(x, a, b, lmax, inv_mass):
+def _project_one(x, a, b, lmax, inv_mass, keep_out, contact, contact_n):
+    """Move a and b toward each other (mass-weighted) back to length lmax. keep_out: an end
+    touching the body is not moved into it (the inward part along its contact normal is
+    dropped), so the spring may stay a little long."""
     dx = x[b, 0] - x[a, 0]
     dy = x[b, 1] - x[a, 1]
     dz = x[b, 2] - x[a, 2]
@@ -241,32 +244,50 @@ def _project_one(x, a, b, lmax, inv_mass):
         return False
     wa, wb = inv_mass[a], inv_mass[b]
     corr = (length - lmax) / (length * (wa + wb))
-    x[a, 0] += wa * corr * dx
-    x[a, 1] += wa * corr * dy
-    x[a, 2] += wa * corr * dz
-    x[b, 0] -= wb * corr * dx
-    x[b, 1] -= wb * corr * dy
-    x[b, 2] -= wb * corr * dz
+    ax, ay, az = wa * corr * dx, wa * corr * dy, wa * corr * dz
+    bx, by, bz = -wb * corr * dx, -wb * corr * dy, -wb * corr * dz
+    if keep_out:
+        if contact[a]:
+            dn = ax * contact_n[a, 0] + ay * contact_n[a, 1] + az * contact_n[a, 2]
+            if dn < 0.0:
+                ax -= dn * contact_n[a, 0]
+                ay -= dn * contact_n[a, 1]
+                az -= dn * contact_n[a, 2]
+        if contact[b]:
+            dn = bx * contact_n[b, 0] + by * contact_n[b, 1] + bz * contact_n[b, 2]
+            if dn < 0.0:
+                bx -= dn * contact_n[b, 0]
+                by -= dn * contact_n[b, 1]
+                bz -= dn * contact_n[b, 2]
+    x[a, 0] += ax
+    x[a, 1] += ay
+    x[a, 2] += az
+    x[b, 0] += bx
+    x[b, 1] += by
+    x[b, 2] += bz
     return True
 
 
 @serial_kernel
-def provot_positions(x, springs, rest, active, threshold, inv_mass, passes, work):
+def provot_positions(x, springs, rest, active, threshold, inv_mass, passes, work, keep_out, contact, contact_n):
     """Provot (1995) position modification: move the ends of springs longer than
     (1 + threshold) x rest toward each other (mass-weighted) back to that length. One sweep
     finds them (into `work`), further passes revisit only those. Used as the comparison mode
-    and, with a slightly larger threshold, as the strain guard behind the velocity modification.
+    and, with a slightly larger threshold, as the strain guard behind the velocity modification
+    (keep_out: the guard never pulls cloth into the body -- see _project_one).
     Returns the number of springs found over the limit."""
     n_act = 0
     for s in range(springs.shape[0]):
-        if active[s] and _project_one(x, springs[s, 0], springs[s, 1], (1.0 + threshold) * rest[s], inv_mass):
+        if active[s] and _project_one(x, springs[s, 0], springs[s, 1], (1.0 + threshold) * rest[s], inv_mass,
+                                          keep_out, contact, contact_n):
             work[n_act] = s
             n_act += 1
     for _ in range(passes - 1):
         changed = 0
         for k in range(n_act):
             s = work[k]
-            if _project_one(x, springs[s, 0], springs[s, 1], (1.0 + threshold) * rest[s], inv_mass):
+            if _project_one(x, springs[s, 0], springs[s, 1], (1.0 + threshold) * rest[s], inv_mass,
+                                          keep_out, contact, contact_n):
                 changed += 1
         if changed == 0:
             break

@@ -65,6 +65,7 @@ class ClothSolver:
         self.iterations = 0
         self.last_hits = 0
         self.strain_guard = p.strain_guard  # the drape turns it off while sewing
+        self.guarded = 0  # springs the strain guard shortened in the last step
         self.recover = p.recover  # ... and the strain recovery (it would fight the seam pull)
         self.sewing = None  # (pairs, welded, tau, vmax) while sewing: see engine.cloth.welds
         self._q, self._q_age, self._q_version = None, 0, None  # the last map answer (see _contacts)
@@ -115,12 +116,12 @@ class ClothSolver:
         K.integrate_positions(state.x, state.v, dt)
         if self.mode == K.VM_PROVOT:
             K.provot_positions(state.x, m.springs, m.rest, self.active, m.fabric.strain_threshold,
-                               m.inv_mass, p.vm_passes, self.vm_work)
+                               m.inv_mass, p.vm_passes, self.vm_work, False, self.contact, self.contact_n)
         elif self.strain_guard is not None:
             # what the velocity modification could not hold (the body pushing a band outward)
-            K.provot_positions(state.x, m.springs, m.rest, self.active,
-                               m.fabric.strain_threshold + self.strain_guard, m.inv_mass, p.vm_passes,
-                               self.vm_work)
+            self.guarded = K.provot_positions(state.x, m.springs, m.rest, self.active,
+                                              m.fabric.strain_threshold + self.strain_guard, m.inv_mass,
+                                              p.vm_passes, self.vm_work, True, self.contact, self.contact_n)
         t3 = time.perf_counter()
         self.timing["cloth"] += (t1 - t0) + (t3 - t2)
         self.timing["collision"] += t2 - t1

@@ -56,8 +56,9 @@ class DrapeOptions:
     settle_speed: float = 0.005  # m/s: RMS drift of the vertices over a window ...
     strain_guard: float | None = 0.009  # the drape's positions keep springs within the fabric's
     # threshold + this (Provot) where the velocity modification cannot (the body pushing cloth
-    # outward): measured 6.4 % on two shear springs of the trousers without it; at 0.005 the
-    # trousers took twice the iterations to settle (ClothParams.strain_guard, if set, wins)
+    # outward), never pulling cloth into the body: measured 6.4 % on two shear springs of the
+    # trousers without it; at 0.005 the trousers took twice the iterations to settle
+    # (ClothParams.strain_guard, if set, wins)
     too_tight: float = 0.10  # a drape whose strain exceeds the fabric's threshold by this is refused
     observe_every: float = 0.02  # s of simulated time between calls of the observer, if any
     settle_time: float = 0.25  # s: ... of this length, twice in a row (a window long against
