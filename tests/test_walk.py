@@ -354,3 +354,15 @@ def test_object_space_walk(walked):
     assert r["strain_max"] < 0.15
     assert any("object-space" in line for line in r["left_out"])
     assert r["map_frames_rendered"] >= 15  # one refit per frame
+
+
+@pytest.mark.parametrize("field,value,words", [("contact_rounds", 0, "contact_rounds"),
+                                               ("collide_every", 17, "collide_every"),
+                                               ("vm_passes", 0, "vm_passes")])
+def test_walk_options_refuse_absurd_solver_settings(field, value, words):
+    from engine.errors import InputError
+    from engine.scene.walk import WalkOptions
+
+    WalkOptions().validate()  # the defaults are valid
+    with pytest.raises(InputError, match=words):
+        WalkOptions(**{field: value}).validate()
