@@ -358,7 +358,7 @@ def test_object_space_walk(walked):
 
 @pytest.mark.parametrize("field,value,words", [("contact_rounds", 0, "contact_rounds"),
                                                ("collide_every", 17, "collide_every"),
-                                               ("vm_passes", 0, "vm_passes")])
+                                               ("vm_passes", 0, "vm_passes"), ("strain_guard", -0.1, "strain_guard")])
 def test_walk_options_refuse_absurd_solver_settings(field, value, words):
     from engine.errors import InputError
     from engine.scene.walk import WalkOptions
