@@ -79,6 +79,8 @@ class DrapeResult:
     kinetic_energy: float
     strain_max: float
     dt: float
+    strain_guard: float | None = None  # the drape's guard (threshold + this), None: off
+    guard_share: float = 0.0  # share of the last settle window's steps in which the guard acted
 
 
 def _noop(stage: str, fraction: float, message: str) -> None:
@@ -178,8 +180,10 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
     ramp_it = max(1, int(o.gravity_ramp / dt))
     settled = False
     snap, calm, drift = state.x.copy(), 0, np.inf
+    guard_steps, guard_share = 0, 0.0  # steps of the window in which the strain guard acted
     for it in range(budget):
         solver.step(state, gravity_scale=min(1.0, (it + 1) / ramp_it), damping_scale=o.drape_damping)
+        guard_steps += solver.guarded > 0
         if observer is not None and it % observe == 0:
             observer("draping", state.x, tri1, None)
         if it % check_every == 0:
@@ -190,6 +194,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
             # (contacts keep a jitter of a few mm/s in the velocities that goes nowhere)
             drift = float(np.sqrt(np.mean(np.sum((state.x - snap) ** 2, axis=1)))) / (window * dt)
             snap[:] = state.x
+            guard_share, guard_steps = guard_steps / window, 0
             calm = calm + 1 if drift < o.settle_speed else 0
             if calm >= 2 and it >= min_it:
                 settled = True
@@ -208,7 +213,8 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
     return DrapeResult(positions=state.x.copy(), triangles=_triangles(model), model=model, state=state,
                        iterations=iters, timing={**timing, **{f"{k}_total": v for k, v in cloth_t.items()}},
                        seam_gap_max=gap_max, settled=settled, kinetic_energy=solver.kinetic_energy(state),
-                       strain_max=solver.max_strain(state), dt=dt)
+                       strain_max=solver.max_strain(state), dt=dt, strain_guard=solver.strain_guard,
+                       guard_share=guard_share)
 
 
 def _edge(g: Garment) -> float:

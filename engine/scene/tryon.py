@@ -136,7 +136,10 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
                          "total": time.perf_counter() - t_all},
         "penetration_mm": {"max": pen["max"] * 1000, "p99": pen["p99"] * 1000,
                            "count_inside": int(pen["count_inside"])},
-        "strain": {"max": res.strain_max, "threshold": fab.strain_threshold},
+        # the guard holds strain at threshold + guard by moving positions (never into the body):
+        # guard_share says how much of the fit it held in the end (0: none of the last steps)
+        "strain": {"max": res.strain_max, "threshold": fab.strain_threshold, "guard": res.strain_guard,
+                   "guard_share": res.guard_share},
         "seam_gap_mm": {"max": res.seam_gap_max * 1000},
         "kinetic_energy_j": res.kinetic_energy,
         "settled": bool(res.settled),
