@@ -76,7 +76,12 @@ def test_page_dresses_the_default_avatar(server, tmp_path):
         page.select_option("#quality", "3")
         page.screenshot(path=str(shots / "1-form.png"))
         page.click("#tryon")
-        page.wait_for_function("document.getElementById('status').textContent.startsWith('Done')", timeout=240_000)
+        # ends on success or on a failure the page shows (the test then fails with its message
+        # at once instead of waiting out the timeout)
+        page.wait_for_function("(t => t.startsWith('Done') || t.startsWith('The try-on '))"
+                               "(document.getElementById('status').textContent)", timeout=240_000)
+        text = page.inner_text("#status")
+        assert text.startswith("Done"), text
         frame = page.frame_locator("#viewer")
         frame.locator("canvas").first.wait_for(timeout=60_000)
         time.sleep(6)  # the recording plays (the last frame is the draped dress)
