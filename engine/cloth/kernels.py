@@ -232,10 +232,21 @@ def modify_velocities(x, v, springs, rest, active, threshold, mode, gravity, dt,
 
 
 @njit(fastmath=True, cache=True, inline="always")
+def outward_only(px, py, pz, i, contact, contact_n):
+    """A move (px, py, pz) of vertex i without its part into the body: where i touches the body
+    and the move points inward along the contact normal, that part is dropped."""
+    if contact[i]:
+        nx, ny, nz = contact_n[i, 0], contact_n[i, 1], contact_n[i, 2]
+        pn = px * nx + py * ny + pz * nz
+        if pn < 0.0:
+            return px - pn * nx, py - pn * ny, pz - pn * nz
+    return px, py, pz
+
+
+@njit(fastmath=True, cache=True, inline="always")
 def _project_one(x, a, b, lmax, inv_mass, keep_out, contact, contact_n):
     """Move a and b toward each other (mass-weighted) back to length lmax. keep_out: an end
-    touching the body is not moved into it (the inward part along its contact normal is
-    dropped), so the spring may stay a little long."""
+    touching the body is not moved into it (outward_only), so the spring may stay a little long."""
     dx = x[b, 0] - x[a, 0]
     dy = x[b, 1] - x[a, 1]
     dz = x[b, 2] - x[a, 2]
@@ -247,18 +258,8 @@ def _project_one(x, a, b, lmax, inv_mass, keep_out, contact, contact_n):
     ax, ay, az = wa * corr * dx, wa * corr * dy, wa * corr * dz
     bx, by, bz = -wb * corr * dx, -wb * corr * dy, -wb * corr * dz
     if keep_out:
-        if contact[a]:
-            dn = ax * contact_n[a, 0] + ay * contact_n[a, 1] + az * contact_n[a, 2]
-            if dn < 0.0:
-                ax -= dn * contact_n[a, 0]
-                ay -= dn * contact_n[a, 1]
-                az -= dn * contact_n[a, 2]
-        if contact[b]:
-            dn = bx * contact_n[b, 0] + by * contact_n[b, 1] + bz * contact_n[b, 2]
-            if dn < 0.0:
-                bx -= dn * contact_n[b, 0]
-                by -= dn * contact_n[b, 1]
-                bz -= dn * contact_n[b, 2]
+        ax, ay, az = outward_only(ax, ay, az, a, contact, contact_n)
+        bx, by, bz = outward_only(bx, by, bz, b, contact, contact_n)
     x[a, 0] += ax
     x[a, 1] += ay
     x[a, 2] += az

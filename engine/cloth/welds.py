@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from engine.cloth.kernels import outward_only
 from engine.jit import serial_kernel
 
 
@@ -79,12 +80,8 @@ def pull_seams(x, v, mass, pairs, welded, tau, vmax, contact, contact_n):
             continue
         dv = speed - closing
         for end, sgn, w in ((a, 1.0, wa), (b, -1.0, wb)):
-            px, py, pz = sgn * w * dv * ux, sgn * w * dv * uy, sgn * w * dv * uz
-            if contact[end]:
-                nx, ny, nz = contact_n[end, 0], contact_n[end, 1], contact_n[end, 2]
-                pn = px * nx + py * ny + pz * nz
-                if pn < 0.0:
-                    px, py, pz = px - pn * nx, py - pn * ny, pz - pn * nz
+            px, py, pz = outward_only(sgn * w * dv * ux, sgn * w * dv * uy, sgn * w * dv * uz, end,
+                                      contact, contact_n)
             v[end, 0] += px
             v[end, 1] += py
             v[end, 2] += pz
