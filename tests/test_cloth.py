@@ -239,7 +239,7 @@ def _vm(x, v, mode, threshold=0.1, recover=1e12, active=True, body_v=None):
     work = np.zeros(1, dtype=np.int32)
     body_v = np.zeros((2, 3)) if body_v is None else np.asarray(body_v, np.float64)
     return K.modify_velocities(x, v, springs, rest, np.array([active]), threshold, K.VM_MODES[mode],
-                               np.array([0.0, -9.81, 0.0]), 1e-4, body_v, 4, work, recover)
+                               np.array([0.0, -9.81, 0.0]), 1e-4, body_v, 4, work, np.zeros((1, 4)), recover)
 
 
 @pytest.mark.parametrize("recover", [1e12, ClothParams().recover])
@@ -532,3 +532,57 @@ def test_strain_guard_never_pulls_a_contact_into_the_body():
     assert np.linalg.norm(x[1] - x[0]) < np.sqrt(2) * 0.1  # the spring still got shorter
     _, x = run(False)
     assert x[0, 1] < 0.0
+
+
+@pytest.mark.parametrize("mode", ["average", "directional"])
+@pytest.mark.parametrize("rounds", [1, 2, 4])
+def test_contact_rounds_match_the_kernels_in_turn(mode, rounds):
+    """K.contact_rounds (the solver's fused call) gives what modify_velocities, point_average and
+    collision_response give called one after the other, round by round."""
+    rng = np.random.default_rng(7)
+    n, nq, nt, s = 300, 80, 20, 1200
+    x = rng.normal(size=(n, 3))
+    v0 = rng.normal(size=(n, 3))
+    springs = rng.integers(0, n, (s, 2)).astype(np.int32)
+    rest = np.linalg.norm(x[springs[:, 1]] - x[springs[:, 0]], axis=1) * rng.uniform(0.85, 1.1, s)
+    active = np.ones(s, np.bool_)
+    quads = rng.integers(0, n, (nq, 4)).astype(np.int32)
+    tris = rng.integers(0, n, (nt, 3)).astype(np.int32)
+    m = n + nq + nt
+    status = rng.choice(np.array([0, 0, 0, 1, 2], np.int8), m)
+    normal = rng.normal(size=(m, 3))
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    bvel = rng.normal(size=(m, 3)) * 0.1
+    depth = rng.uniform(0.0, 0.01, m)
+    g = np.array([0.0, -9.81, 0.0])
+    mode_i = K.VM_MODES[mode]
+    body_prev = rng.normal(size=(n, 3)) * 0.1  # the body velocities of the previous step
+    out = []
+    for fused in (False, True):
+        v = v0.copy()
+        work, geo = np.zeros(s, np.int32), np.zeros((s, 4))
+        body_v = body_prev.copy()
+        contact, contact_n = np.zeros(n, np.bool_), np.zeros((n, 3))
+        n_act = K.modify_velocities(x, v, springs, rest, active, 0.05, mode_i, g, 1e-4, body_v, 6, work, geo,
+                                    0.002)
+        assert n_act > 0
+        pv = np.zeros((m, 3))
+        K.point_average(v, quads, tris, pv)
+        if fused:
+            hits = K.contact_rounds(v, springs, mode_i, g, 1e-4, 6, work, geo, 0.002, n_act,
+                                    rounds, status, normal, bvel, depth, n, quads, tris, 0.005, 0.0, 0.4,
+                                    contact, contact_n, body_v, np.zeros(m, np.int32), np.zeros(n, np.int32))
+        else:
+            for r in range(rounds):
+                if r > 0:
+                    K.modify_velocities(x, v, springs, rest, active, 0.05, mode_i, g, 1e-4, body_v, 6, work,
+                                        geo, 0.002, n_act)
+                    K.point_average(v, quads, tris, pv)
+                hits = K.collision_response(v, status, normal, bvel, depth, pv, n, quads, tris, 0.005, 0.0, 0.4,
+                                            1e-4, contact, contact_n, body_v)
+        out.append((hits, v, contact, contact_n[contact], body_v))
+    assert out[0][0] == out[1][0] == int((status != 0).sum())
+    np.testing.assert_allclose(out[1][1], out[0][1], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(out[1][2], out[0][2])
+    np.testing.assert_array_equal(out[1][3], out[0][3])
+    np.testing.assert_array_equal(out[1][4], out[0][4])

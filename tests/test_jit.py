@@ -103,7 +103,7 @@ def test_serial_kernel_matches_plain_njit(fn):
     if fn == "modify_velocities":
         rest = np.linalg.norm(x[springs[:, 1]] - x[springs[:, 0]], axis=1) * 0.9
         args = (springs, rest, np.ones(s, np.bool_), 0.05, K.VM_AVERAGE, np.array([0, -9.81, 0.0]), 1e-3,
-                np.zeros((n, 3)), 6, np.zeros(s, np.int32), 0.002)
+                np.zeros((n, 3)), 6, np.zeros(s, np.int32), np.zeros((s, 4)), 0.002)
         outs = []
         for f in (getattr(K, fn), njit(fastmath=True)(getattr(K, fn).py_func)):
             vv = v.copy()

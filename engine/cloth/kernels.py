@@ -32,16 +32,17 @@ VM_MODES = {"zero": VM_ZERO, "average": VM_AVERAGE, "directional": VM_DIRECTIONA
 
 @serial_kernel
 def eval_forces_and_integrate(x, v, inv_mass, mass, springs, rest, k, spring_c, gravity, damping,
-                              contact, contact_n, mu, dt, f_out, active, threshold, work):
+                              contact, contact_n, mu, dt, f_out, active, threshold, work, geo):
     """Springs (eq. 2) with damping along each spring (spring_c, N.s/m) -- one pass over the
     springs, each adding its force to both ends (serial, so the scatter is race-free and every
     length is computed once) -- gravity, viscous damping, then the reaction force of seed 000
     eq. 16 where the vertex touched the body in the previous step (cancel the force into the
     body, Coulomb friction on the tangential part), then the velocity half of eq. 3:
     v += dt f / m. f_out keeps the force for diagnostics.
-    The same pass lists the active springs longer than (1 + threshold) x rest in `work` and
-    returns their count: the velocity modification that follows (modify_velocities with
-    n_known) needs no sweep of its own, as positions do not move in between."""
+    The same pass lists the active springs longer than (1 + threshold) x rest in `work` (their
+    directions and excesses in `geo`, see _spring_geo) and returns their count: the velocity
+    modification that follows (modify_velocities with n_known) needs no sweep of its own, as
+    positions do not move in between."""
     n = x.shape[0]
     for i in range(n):
         f_out[i, 0] = mass[i] * gravity[0] - damping * mass[i] * v[i, 0]
@@ -55,8 +56,13 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, springs, rest, k, spring_c, 
         dy = x[b, 1] - x[a, 1]
         dz = x[b, 2] - x[a, 2]
         length = np.sqrt(dx * dx + dy * dy + dz * dz)
-        if active[s] and length > (1.0 + threshold) * rest[s]:
+        limit = (1.0 + threshold) * rest[s]
+        if active[s] and length > limit:
             work[n_act] = s
+            geo[n_act, 0] = dx / length  # as _spring_geo
+            geo[n_act, 1] = dy / length
+            geo[n_act, 2] = dz / length
+            geo[n_act, 3] = length - limit
             n_act += 1
         if length > 1e-12:
             # spring force plus damping of the spring's rate of stretch (along the spring)
@@ -121,20 +127,32 @@ def stale_contacts(points, q_points, q_status, q_normal, q_depth, status, depth,
 
 
 @njit(fastmath=True, cache=True, inline="always")
-def _modify_one(x, v, a, b, rest, threshold, mode, gravity, dt, body_v, recover):
-    """One spring of the velocity modification; returns True if it changed velocities.
-    Beyond the seeds, a spring already past the limit by e is also given a closing speed
-    e / recover (recover: a time, shared by its ends), so strain that got in anyway (sewing, the
-    body pushing cloth outward) is worked off instead of only frozen."""
+def _spring_geo(x, a, b, limit, geo, k):
+    """If spring a-b is longer than `limit`, store its direction and excess in geo[k] (ux, uy,
+    uz, length - limit) and return True. Positions do not move during a step's velocity
+    modification, so its passes read this instead of measuring the spring again."""
     dx = x[b, 0] - x[a, 0]
     dy = x[b, 1] - x[a, 1]
     dz = x[b, 2] - x[a, 2]
     length = np.sqrt(dx * dx + dy * dy + dz * dz)
-    limit = (1.0 + threshold) * rest
     if length <= limit or length < 1e-12:
         return False
-    close = (length - limit) / recover  # wanted closing speed
-    ux, uy, uz = dx / length, dy / length, dz / length
+    geo[k, 0] = dx / length
+    geo[k, 1] = dy / length
+    geo[k, 2] = dz / length
+    geo[k, 3] = length - limit
+    return True
+
+
+@njit(fastmath=True, cache=True, inline="always")
+def _modify_one(v, a, b, geo, k, mode, gravity, dt, body_v, recover):
+    """One over-elongated spring (a, b; its direction and excess in geo[k], see _spring_geo) of
+    the velocity modification; returns True if it changed velocities.
+    Beyond the seeds, a spring already past the limit by e is also given a closing speed
+    e / recover (recover: a time, shared by its ends), so strain that got in anyway (sewing, the
+    body pushing cloth outward) is worked off instead of only frozen."""
+    ux, uy, uz = geo[k, 0], geo[k, 1], geo[k, 2]
+    close = geo[k, 3] / recover  # wanted closing speed
     va = v[a, 0] * ux + v[a, 1] * uy + v[a, 2] * uz
     vb = v[b, 0] * ux + v[b, 1] * uy + v[b, 2] * uz
     if vb - va <= -close + 1e-9:  # already shortening fast enough: leave it
@@ -177,7 +195,7 @@ def _modify_one(x, v, a, b, rest, threshold, mode, gravity, dt, body_v, recover)
 
 
 @serial_kernel
-def modify_velocities(x, v, springs, rest, active, threshold, mode, gravity, dt, body_v, passes, work,
+def modify_velocities(x, v, springs, rest, active, threshold, mode, gravity, dt, body_v, passes, work, geo,
                       recover, n_known=-1):
     """Velocity modification against super-elasticity, after each step. For a spring longer
     than (1 + threshold) x rest whose ends move apart, the stretching (along-spring) velocity
@@ -194,41 +212,33 @@ def modify_velocities(x, v, springs, rest, active, threshold, mode, gravity, dt,
     hips), where each spring's change undoes part of its neighbours'.
     n_known >= 0: positions have not moved since the call that found n_known over-elongated
     springs in `work`, so the full sweep is skipped (later rounds of the same step).
-    Returns the number of over-elongated springs."""
-    if n_known >= 0:
-        for _ in range(passes):
-            changed = 0
-            for k in range(n_known):
-                s = work[k]
-                if _modify_one(x, v, springs[s, 0], springs[s, 1], rest[s], threshold, mode, gravity, dt,
-                               body_v, recover):
-                    changed += 1
-            if changed == 0:
-                break
-        return n_known
-    n_act = 0
-    for s in range(springs.shape[0]):
-        if not active[s]:
-            continue
-        a = springs[s, 0]
-        b = springs[s, 1]
-        dx = x[b, 0] - x[a, 0]
-        dy = x[b, 1] - x[a, 1]
-        dz = x[b, 2] - x[a, 2]
-        if dx * dx + dy * dy + dz * dz > ((1.0 + threshold) * rest[s]) ** 2:
-            work[n_act] = s
-            n_act += 1
-            _modify_one(x, v, a, b, rest[s], threshold, mode, gravity, dt, body_v, recover)
-    for _ in range(passes - 1):
+    Returns the number of over-elongated springs.
+    geo (S, 4): the listed springs' directions and excesses (_spring_geo), written by the sweep
+    (or by eval_forces_and_integrate, whose list n_known is)."""
+    n_act = n_known
+    if n_known < 0:
+        n_act = 0
+        for s in range(springs.shape[0]):
+            if active[s] and _spring_geo(x, springs[s, 0], springs[s, 1], (1.0 + threshold) * rest[s], geo, n_act):
+                work[n_act] = s
+                _modify_one(v, springs[s, 0], springs[s, 1], geo, n_act, mode, gravity, dt, body_v, recover)
+                n_act += 1
+        passes -= 1
+    _modify_passes(v, springs, work, geo, n_act, mode, gravity, dt, body_v, passes, recover)
+    return n_act
+
+
+@njit(fastmath=True, cache=True, inline="always")
+def _modify_passes(v, springs, work, geo, n_act, mode, gravity, dt, body_v, passes, recover):
+    """Up to `passes` Gauss-Seidel passes over the n_act listed springs, until one changes nothing."""
+    for _ in range(passes):
         changed = 0
         for k in range(n_act):
             s = work[k]
-            if _modify_one(x, v, springs[s, 0], springs[s, 1], rest[s], threshold, mode, gravity, dt, body_v,
-                           recover):
+            if _modify_one(v, springs[s, 0], springs[s, 1], geo, k, mode, gravity, dt, body_v, recover):
                 changed += 1
         if changed == 0:
             break
-    return n_act
 
 
 @njit(fastmath=True, cache=True, inline="always")
@@ -409,6 +419,105 @@ def collision_response(v, status, normal, body_v, depth, pv, n_vertices, quads, 
             vbody_out[i, 2] = body_v[p, 2]
     for i in range(n):
         if cnt[i] > 0:
+            v[i, 0] = acc[i, 0] / cnt[i]
+            v[i, 1] = acc[i, 1] / cnt[i]
+            v[i, 2] = acc[i, 2] / cnt[i]
+    return hits
+
+
+@serial_kernel
+def contact_rounds(v, springs, mode, gravity, dt, passes, work, geo, recover, n_act,
+                   rounds, status, normal, body_v, depth, n_vertices, quads, tris, tol, refl, mu,
+                   contact, contact_n, vbody_out, hit_buf, touched_buf):
+    """The collision response of a step alternated with the strain limit on the same contacts,
+    in one call: `rounds` times (1) from the second round on, the velocity modification over the
+    n_act springs known to be over-elongated (modify_velocities with n_known), (2) the response
+    of every point in contact (collision_response, each point's velocity averaged from its
+    corners as point_average does). The same arithmetic as calling those kernels in turn, but
+    only the points in contact and the vertices they touch are visited in each round (those
+    kernels sweep all vertices and points every round). hit_buf (N + Q + T,) and touched_buf
+    (N,) int32 are work buffers. Returns the number of points in contact."""
+    n = n_vertices
+    nq = quads.shape[0]
+    m = status.shape[0]
+    for i in range(n):
+        contact[i] = False
+        vbody_out[i, 0] = 0.0
+        vbody_out[i, 1] = 0.0
+        vbody_out[i, 2] = 0.0
+    hits = 0
+    for p in range(m):
+        if status[p] != 0:
+            hit_buf[hits] = p
+            hits += 1
+    # the touched vertices (each once) and the contact each one reports (the last point wins,
+    # as in collision_response)
+    n_touch = 0
+    for h in range(hits):
+        p = hit_buf[h]
+        corners = 1 if p < n else (4 if p < n + nq else 3)
+        for r in range(corners):
+            if p < n:
+                i = p
+            elif corners == 4:
+                i = quads[p - n, r]
+            else:
+                i = tris[p - n - nq, r]
+            if not contact[i]:
+                contact[i] = True
+                touched_buf[n_touch] = i
+                n_touch += 1
+            contact_n[i, 0] = normal[p, 0]
+            contact_n[i, 1] = normal[p, 1]
+            contact_n[i, 2] = normal[p, 2]
+            vbody_out[i, 0] = body_v[p, 0]
+            vbody_out[i, 1] = body_v[p, 1]
+            vbody_out[i, 2] = body_v[p, 2]
+    acc = np.empty((n, 3))
+    cnt = np.empty(n, dtype=np.int32)
+    third = 1.0 / 3.0
+    for rnd in range(rounds):
+        if rnd > 0:
+            _modify_passes(v, springs, work, geo, n_act, mode, gravity, dt, vbody_out, passes, recover)
+        for k in range(n_touch):
+            i = touched_buf[k]
+            acc[i, 0] = 0.0
+            acc[i, 1] = 0.0
+            acc[i, 2] = 0.0
+            cnt[i] = 0
+        for h in range(hits):
+            p = hit_buf[h]
+            if p < n:
+                corners = 1
+                pvx, pvy, pvz = v[p, 0], v[p, 1], v[p, 2]
+            elif p < n + nq:
+                corners = 4
+                i0, i1, i2, i3 = quads[p - n, 0], quads[p - n, 1], quads[p - n, 2], quads[p - n, 3]
+                pvx = 0.25 * (v[i0, 0] + v[i1, 0] + v[i2, 0] + v[i3, 0])
+                pvy = 0.25 * (v[i0, 1] + v[i1, 1] + v[i2, 1] + v[i3, 1])
+                pvz = 0.25 * (v[i0, 2] + v[i1, 2] + v[i2, 2] + v[i3, 2])
+            else:
+                corners = 3
+                t = p - n - nq
+                i0, i1, i2 = tris[t, 0], tris[t, 1], tris[t, 2]
+                pvx = third * (v[i0, 0] + v[i1, 0] + v[i2, 0])
+                pvy = third * (v[i0, 1] + v[i1, 1] + v[i2, 1])
+                pvz = third * (v[i0, 2] + v[i1, 2] + v[i2, 2])
+            rx, ry, rz = _respond(pvx, pvy, pvz, normal[p, 0], normal[p, 1], normal[p, 2],
+                                  body_v[p, 0], body_v[p, 1], body_v[p, 2], depth[p], tol, refl, mu, dt)
+            for r in range(corners):
+                if p < n:
+                    i = p
+                elif corners == 4:
+                    i = quads[p - n, r]
+                else:
+                    i = tris[p - n - nq, r]
+                acc[i, 0] += rx
+                acc[i, 1] += ry
+                acc[i, 2] += rz
+                cnt[i] += 1
+        for k in range(n_touch):
+            i = touched_buf[k]
             v[i, 0] = acc[i, 0] / cnt[i]
             v[i, 1] = acc[i, 1] / cnt[i]
             v[i, 2] = acc[i, 2] / cnt[i]

@@ -55,12 +55,15 @@ class ClothSolver:
         self.active = model.kind != FLEXION  # flexion springs may shorten/lengthen with folds
         self.f = np.zeros((n, 3))
         self.vm_work = np.zeros(len(model.springs), dtype=np.int32)
+        self.vm_geo = np.zeros((len(model.springs), 4))  # the listed springs' direction, excess
         self.contact = np.zeros(n, dtype=np.bool_)
         self.contact_n = np.zeros((n, 3))
         self.body_v = np.zeros((n, 3))
         m = n + len(model.quads) + len(model.tris)
         self.points = np.zeros((m, 3))
         self.point_v = np.zeros((m, 3))
+        self.hit_buf = np.zeros(m, dtype=np.int32)  # work buffers of K.contact_rounds
+        self.touched_buf = np.zeros(n, dtype=np.int32)
         self.timing = {"cloth": 0.0, "collision": 0.0}
         self.iterations = 0
         self.last_hits = 0
@@ -80,11 +83,12 @@ class ClothSolver:
         n_over = K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, m.springs, m.rest, m.stiffness,
                                              m.spring_c, self.gravity * gravity_scale, p.damping * damping_scale,
                                              self.contact, self.contact_n, m.fabric.friction * friction_scale, dt,
-                                             self.f, self.active, m.fabric.strain_threshold, self.vm_work)
+                                             self.f, self.active, m.fabric.strain_threshold, self.vm_work,
+                                             self.vm_geo)
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 §3)
         n_act = K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
                                     self.mode, self.gravity * gravity_scale, dt, self.body_v, p.vm_passes,
-                                    self.vm_work, recover, n_over)
+                                    self.vm_work, self.vm_geo, recover, n_over)
         if self.sewing is not None:
             # sewing has priority over the strain limit (it stretches cloth near a seam by
             # design; the drape's strain recovery relaxes that), but not over the collision below
@@ -101,16 +105,12 @@ class ClothSolver:
             # is pushed outward while it may not stretch): alternate the two velocity changes a
             # few rounds on the same contacts -- this converges to "stop sliding" -- and end on the
             # collision response so nothing moves into the body.
-            for r in range(p.contact_rounds):
-                if r > 0:
-                    K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active,
-                                        m.fabric.strain_threshold, self.mode, self.gravity * gravity_scale, dt,
-                                        self.body_v, p.vm_passes, self.vm_work, recover, n_act)
-                    K.point_average(state.v, m.quads, m.tris, self.point_v)
-                self.last_hits = K.collision_response(state.v, status, normal, bvel, depth, self.point_v, m.n,
-                                                      m.quads, m.tris, p.tolerance, p.reflection,
-                                                      m.fabric.friction * friction_scale, dt, self.contact,
-                                                      self.contact_n, self.body_v)
+            self.last_hits = K.contact_rounds(state.v, m.springs, self.mode, self.gravity * gravity_scale, dt,
+                                              p.vm_passes, self.vm_work, self.vm_geo, recover, n_act,
+                                              p.contact_rounds, status, normal, bvel, depth, m.n, m.quads, m.tris,
+                                              p.tolerance, p.reflection, m.fabric.friction * friction_scale,
+                                              self.contact, self.contact_n, self.body_v, self.hit_buf,
+                                              self.touched_buf)
         t2 = time.perf_counter()
         # positions (eq. 3); Provot's position modification when chosen as the comparison
         K.integrate_positions(state.x, state.v, dt)
