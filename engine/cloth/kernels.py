@@ -59,10 +59,7 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, springs, rest, k, spring_c, 
         limit = (1.0 + threshold) * rest[s]
         if active[s] and length > limit:
             work[n_act] = s
-            geo[n_act, 0] = dx / length  # as _spring_geo
-            geo[n_act, 1] = dy / length
-            geo[n_act, 2] = dz / length
-            geo[n_act, 3] = length - limit
+            _store_geo(geo, n_act, dx, dy, dz, length, limit)
             n_act += 1
         if length > 1e-12:
             # spring force plus damping of the spring's rate of stretch (along the spring)
@@ -127,6 +124,15 @@ def stale_contacts(points, q_points, q_status, q_normal, q_depth, status, depth,
 
 
 @njit(fastmath=True, cache=True, inline="always")
+def _store_geo(geo, k, dx, dy, dz, length, limit):
+    """geo[k] = the spring's direction (dx, dy, dz) / length and its excess length - limit."""
+    geo[k, 0] = dx / length
+    geo[k, 1] = dy / length
+    geo[k, 2] = dz / length
+    geo[k, 3] = length - limit
+
+
+@njit(fastmath=True, cache=True, inline="always")
 def _spring_geo(x, a, b, limit, geo, k):
     """If spring a-b is longer than `limit`, store its direction and excess in geo[k] (ux, uy,
     uz, length - limit) and return True. Positions do not move during a step's velocity
@@ -137,10 +143,7 @@ def _spring_geo(x, a, b, limit, geo, k):
     length = np.sqrt(dx * dx + dy * dy + dz * dz)
     if length <= limit or length < 1e-12:
         return False
-    geo[k, 0] = dx / length
-    geo[k, 1] = dy / length
-    geo[k, 2] = dz / length
-    geo[k, 3] = length - limit
+    _store_geo(geo, k, dx, dy, dz, length, limit)
     return True
 
 
@@ -305,27 +308,47 @@ def provot_positions(x, springs, rest, active, threshold, inv_mass, passes, work
     return n_act
 
 
+@njit(fastmath=True, cache=True, inline="always")
+def _n_corners(p, n, nq):
+    """Checked point p: a vertex (p < n, 1 corner), a quad midpoint (4) or a triangle centroid (3)."""
+    return 1 if p < n else (4 if p < n + nq else 3)
+
+
+@njit(fastmath=True, cache=True, inline="always")
+def _corner(p, r, n, nq, quads, tris):
+    """The vertex at corner r of checked point p."""
+    if p < n:
+        return p
+    if p < n + nq:
+        return quads[p - n, r]
+    return tris[p - n - nq, r]
+
+
+@njit(fastmath=True, cache=True, inline="always")
+def _point_mean(a, p, n, nq, quads, tris):
+    """A per-vertex field (N, 3) at checked point p: the vertex's value, or its face's mean."""
+    if p < n:
+        return a[p, 0], a[p, 1], a[p, 2]
+    if p < n + nq:
+        i0, i1, i2, i3 = quads[p - n, 0], quads[p - n, 1], quads[p - n, 2], quads[p - n, 3]
+        return (0.25 * (a[i0, 0] + a[i1, 0] + a[i2, 0] + a[i3, 0]),
+                0.25 * (a[i0, 1] + a[i1, 1] + a[i2, 1] + a[i3, 1]),
+                0.25 * (a[i0, 2] + a[i1, 2] + a[i2, 2] + a[i3, 2]))
+    t = p - n - nq
+    i0, i1, i2 = tris[t, 0], tris[t, 1], tris[t, 2]
+    third = 1.0 / 3.0
+    return (third * (a[i0, 0] + a[i1, 0] + a[i2, 0]), third * (a[i0, 1] + a[i1, 1] + a[i2, 1]),
+            third * (a[i0, 2] + a[i1, 2] + a[i2, 2]))
+
+
 @serial_kernel
 def point_average(a, quads, tris, out):
     """A per-vertex field (N, 3) at the checked points: the vertices, then quad midpoints, then
     triangle centroids (seed 003 §6's face-body checks), into out (N + Q + T, 3)."""
     n = a.shape[0]
     nq = quads.shape[0]
-    for i in range(n):
-        out[i, 0] = a[i, 0]
-        out[i, 1] = a[i, 1]
-        out[i, 2] = a[i, 2]
-    for q in range(nq):
-        i0, i1, i2, i3 = quads[q, 0], quads[q, 1], quads[q, 2], quads[q, 3]
-        out[n + q, 0] = 0.25 * (a[i0, 0] + a[i1, 0] + a[i2, 0] + a[i3, 0])
-        out[n + q, 1] = 0.25 * (a[i0, 1] + a[i1, 1] + a[i2, 1] + a[i3, 1])
-        out[n + q, 2] = 0.25 * (a[i0, 2] + a[i1, 2] + a[i2, 2] + a[i3, 2])
-    third = 1.0 / 3.0
-    for t in range(tris.shape[0]):
-        i0, i1, i2 = tris[t, 0], tris[t, 1], tris[t, 2]
-        out[n + nq + t, 0] = third * (a[i0, 0] + a[i1, 0] + a[i2, 0])
-        out[n + nq + t, 1] = third * (a[i0, 1] + a[i1, 1] + a[i2, 1])
-        out[n + nq + t, 2] = third * (a[i0, 2] + a[i1, 2] + a[i2, 2])
+    for p in range(n + nq + tris.shape[0]):
+        out[p, 0], out[p, 1], out[p, 2] = _point_mean(a, p, n, nq, quads, tris)
 
 
 @serial_kernel
@@ -393,19 +416,8 @@ def collision_response(v, status, normal, body_v, depth, pv, n_vertices, quads, 
         hits += 1
         rx, ry, rz = _respond(pv[p, 0], pv[p, 1], pv[p, 2], normal[p, 0], normal[p, 1], normal[p, 2],
                               body_v[p, 0], body_v[p, 1], body_v[p, 2], depth[p], tol, refl, mu, dt)
-        if p < n:
-            corners = 1
-        elif p < n + quads.shape[0]:
-            corners = 4
-        else:
-            corners = 3
-        for r in range(corners):
-            if p < n:
-                i = p
-            elif corners == 4:
-                i = quads[p - n, r]
-            else:
-                i = tris[p - n - quads.shape[0], r]
+        for r in range(_n_corners(p, n, quads.shape[0])):
+            i = _corner(p, r, n, quads.shape[0], quads, tris)
             acc[i, 0] += rx
             acc[i, 1] += ry
             acc[i, 2] += rz
@@ -455,14 +467,8 @@ def contact_rounds(v, springs, mode, gravity, dt, passes, work, geo, recover, n_
     n_touch = 0
     for h in range(hits):
         p = hit_buf[h]
-        corners = 1 if p < n else (4 if p < n + nq else 3)
-        for r in range(corners):
-            if p < n:
-                i = p
-            elif corners == 4:
-                i = quads[p - n, r]
-            else:
-                i = tris[p - n - nq, r]
+        for r in range(_n_corners(p, n, nq)):
+            i = _corner(p, r, n, nq, quads, tris)
             if not contact[i]:
                 contact[i] = True
                 touched_buf[n_touch] = i
@@ -475,7 +481,6 @@ def contact_rounds(v, springs, mode, gravity, dt, passes, work, geo, recover, n_
             vbody_out[i, 2] = body_v[p, 2]
     acc = np.empty((n, 3))
     cnt = np.empty(n, dtype=np.int32)
-    third = 1.0 / 3.0
     for rnd in range(rounds):
         if rnd > 0:
             _modify_passes(v, springs, work, geo, n_act, mode, gravity, dt, vbody_out, passes, recover)
@@ -487,31 +492,11 @@ def contact_rounds(v, springs, mode, gravity, dt, passes, work, geo, recover, n_
             cnt[i] = 0
         for h in range(hits):
             p = hit_buf[h]
-            if p < n:
-                corners = 1
-                pvx, pvy, pvz = v[p, 0], v[p, 1], v[p, 2]
-            elif p < n + nq:
-                corners = 4
-                i0, i1, i2, i3 = quads[p - n, 0], quads[p - n, 1], quads[p - n, 2], quads[p - n, 3]
-                pvx = 0.25 * (v[i0, 0] + v[i1, 0] + v[i2, 0] + v[i3, 0])
-                pvy = 0.25 * (v[i0, 1] + v[i1, 1] + v[i2, 1] + v[i3, 1])
-                pvz = 0.25 * (v[i0, 2] + v[i1, 2] + v[i2, 2] + v[i3, 2])
-            else:
-                corners = 3
-                t = p - n - nq
-                i0, i1, i2 = tris[t, 0], tris[t, 1], tris[t, 2]
-                pvx = third * (v[i0, 0] + v[i1, 0] + v[i2, 0])
-                pvy = third * (v[i0, 1] + v[i1, 1] + v[i2, 1])
-                pvz = third * (v[i0, 2] + v[i1, 2] + v[i2, 2])
+            pvx, pvy, pvz = _point_mean(v, p, n, nq, quads, tris)
             rx, ry, rz = _respond(pvx, pvy, pvz, normal[p, 0], normal[p, 1], normal[p, 2],
                                   body_v[p, 0], body_v[p, 1], body_v[p, 2], depth[p], tol, refl, mu, dt)
-            for r in range(corners):
-                if p < n:
-                    i = p
-                elif corners == 4:
-                    i = quads[p - n, r]
-                else:
-                    i = tris[p - n - nq, r]
+            for r in range(_n_corners(p, n, nq)):
+                i = _corner(p, r, n, nq, quads, tris)
                 acc[i, 0] += rx
                 acc[i, 1] += ry
                 acc[i, 2] += rz
