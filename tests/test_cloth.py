@@ -386,17 +386,65 @@ def test_stale_contacts_carry_the_last_answer_forward():
     q_n = np.array([[0, 0, 1.0], [0, 0, 1.0], [1.0, 0, 0]])
     q_d = np.array([0.002, -0.01, 0.004])
     st, d = np.zeros(3, np.int8), np.zeros(3)
+    none = np.zeros(0, np.int64)
     # point 0 moved 3 mm out along its normal (leaves the band), point 2 moved 1 mm deeper
     pts = q_pts + np.array([[0, 0, 0.003], [0.0005, 0, 0], [-0.001, 0, 0]])
-    assert not K.stale_contacts(pts, q_pts, q_st, q_n, q_d, st, d, 0.004, 0.0005)
+    assert K.stale_contacts(pts, q_pts, q_st, q_n, q_d, st, d, 0.004, 0.0005, none, False) == 0
     assert st.tolist() == [0, 0, 2]
     assert d[0] == pytest.approx(-0.001) and d[2] == pytest.approx(0.005)
     # stale: a point moved more than `reach`, or the clear one moved past its distance + slack
-    assert K.stale_contacts(pts, q_pts, q_st, q_n, q_d, st, d, 0.002, 0.0005)
+    assert K.stale_contacts(pts, q_pts, q_st, q_n, q_d, st, d, 0.002, 0.0005, none, False) == -1
     pts[1] = [0.0, 0.0, -0.011]
-    assert K.stale_contacts(pts, q_pts, q_st, q_n, q_d, st, d, 0.1, 0.0005)
+    assert K.stale_contacts(pts, q_pts, q_st, q_n, q_d, st, d, 0.1, 0.0005, none, False) == -1
+    # ... unless the collider can answer that point alone: then it is listed, the rest carries
+    rows = np.zeros(3, np.int64)
+    assert K.stale_contacts(pts, q_pts, q_st, q_n, q_d, st, d, 0.1, 0.0005, rows, False) == 1
+    assert rows[0] == 1
     pts[1] = [0.0, 0.0, -0.0104]
-    assert not K.stale_contacts(pts, q_pts, q_st, q_n, q_d, st, d, 0.1, 0.0005)
+    assert K.stale_contacts(pts, q_pts, q_st, q_n, q_d, st, d, 0.1, 0.0005, none, False) == 0
+
+
+def test_carried_map_depth_follows_the_slope():
+    """The maps measure depth along z: on a surface at 60 degrees from the view (n_z = 0.5) a
+    point that moves 1 mm out along the normal leaves 2 mm of map depth behind; an answer from
+    the side layer (n_z = 0) or an object-space collider is a distance (1 mm)."""
+    n = np.array([[np.sqrt(0.75), 0.0, 0.5], [1.0, 0.0, 0.0]])
+    q_pts = np.zeros((2, 3))
+    pts = q_pts + 0.001 * n
+    q_st, q_d = np.array([1, 1], np.int8), np.array([0.004, 0.004])
+    st, d = np.zeros(2, np.int8), np.zeros(2)
+    none = np.zeros(0, np.int64)
+    K.stale_contacts(pts, q_pts, q_st, n, q_d, st, d, 0.01, 0.0005, none, True)
+    assert d.tolist() == pytest.approx([0.002, 0.003])
+    K.stale_contacts(pts, q_pts, q_st, n, q_d, st, d, 0.01, 0.0005, none, False)
+    assert d.tolist() == pytest.approx([0.003, 0.003])
+
+
+def test_rows_to_ask_and_keep_rows():
+    """At a new query only the contacts and the clear points that may have reached the band are
+    asked; their answers replace the kept ones, the others stay as they were."""
+    q_pts = np.zeros((4, 3))
+    q_st = np.array([1, 0, 0, 0], np.int8)
+    q_d = np.array([0.001, -0.01, -0.0005, -np.inf])  # contact; 10 mm, 0.5 mm clear; no map
+    pts = q_pts + np.array([[0, 0, 0.0001], [0.0002, 0, 0], [0.0006, 0, 0], [0.0003, 0, 0]])
+    rows = np.zeros(4, np.int64)
+    k = K.rows_to_ask(pts, q_pts, q_st, q_d, 0.001, 0.0, rows)
+    assert rows[:k].tolist() == [0, 2]
+    pts[3] = [0.002, 0, 0]  # moved past `reach`: asked even with no map under it
+    k = K.rows_to_ask(pts, q_pts, q_st, q_d, 0.001, 0.0, rows)
+    assert rows[:k].tolist() == [0, 2, 3]
+    status = np.array([2, 9, 1, 0], np.int8)
+    normal = np.arange(12.0).reshape(4, 3)
+    depth = np.array([0.006, 9.0, 0.001, -0.02])
+    q_n, q_bv = np.zeros((4, 3)), np.zeros((4, 3))
+    c_st, c_d = np.zeros(4, np.int8), np.zeros(4)
+    K.keep_rows(rows, k, pts, status, normal, normal + 1, depth, q_pts, q_st, q_n, q_bv, q_d, c_st, c_d)
+    assert q_st.tolist() == c_st.tolist() == [2, 0, 1, 0]
+    assert q_d.tolist() == [0.006, -0.01, 0.001, -0.02]
+    assert c_d.tolist() == [0.006, 0.0, 0.001, -0.02]  # row 1 was not asked: left as it was
+    assert np.array_equal(q_pts[[0, 2, 3]], pts[[0, 2, 3]]) and np.all(q_pts[1] == 0)
+    assert np.array_equal(q_n[[0, 2, 3]], normal[[0, 2, 3]]) and np.all(q_n[1] == 0)
+    assert np.array_equal(q_bv[[0, 2, 3]], normal[[0, 2, 3]] + 1)
 
 
 class _CountingCollider:
@@ -446,6 +494,63 @@ def test_solver_requeries_when_the_body_moves_or_points_travel(garment):
     for _ in range(4):
         s2.step(st)
     assert s2.collider.calls >= 2
+
+
+class _RowsCollider(_CountingCollider):
+    """The floor, able to answer some points alone (as MapCollider.query_rows); counts them."""
+
+    def __init__(self):
+        super().__init__()
+        self.asked = 0
+
+    def query(self, p):
+        self.asked += len(p)
+        return super().query(p)
+
+    def query_rows(self, p, rows, k):
+        self.asked += k
+        r = rows[:k]
+        st, n, bv, d = super().query(p[r])
+        out = [np.zeros(len(p), np.int8), np.zeros_like(p), np.zeros_like(p), np.zeros(len(p))]
+        for o, a in zip(out, (st, n, bv, d)):
+            o[r] = a
+        return tuple(out)
+
+
+def test_solver_asks_a_rows_collider_only_for_points_that_may_have_changed(garment):
+    """A sheet hanging clear of the floor is asked once, however many steps pass; a sheet lying
+    in the floor's band is asked again only for its contacts (every `requery_every` steps), and
+    the carried answers are those a fresh query gives."""
+    m = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
+                    get_fabric("cotton"), H, ClothParams(requery_every=8, requery_move=0.001, collide_every=1))
+    n_pts = m.n + len(m.quads) + len(m.tris)
+    x = garment.positions.copy()
+    x[:, 1] += 0.5 - x[:, 1].min()
+    s = ClothSolver(m, _RowsCollider(), gravity=np.zeros(3))
+    st = ClothState(x, np.zeros_like(x))
+    for _ in range(40):
+        s.step(st)
+    assert s.collider.asked == n_pts  # the first query only
+    # tilted (rotated, not stretched) so that about half of it lies in the floor's band: the
+    # contacts are asked again every 8 steps, the clear half not at all
+    p = garment.positions  # the square lies in the xy plane: lay it on the floor (xz), tilted
+    a = np.arcsin(0.01)
+    x2 = np.stack([p[:, 0] * np.cos(a), 0.004 + p[:, 0] * np.sin(a), p[:, 1]], axis=1)
+    s2 = ClothSolver(m, _RowsCollider(), gravity=np.zeros(3))
+    st2 = ClothState(x2, np.zeros_like(x2))
+    s2.step(st2)
+    n_contact = int(np.count_nonzero(s2._q[1]))
+    assert 0.3 * n_pts < n_contact < 0.7 * n_pts
+    for _ in range(16):
+        s2.step(st2)
+    # all at step 1, the contacts at steps 9 and 17, and the few clear points at the band's
+    # edge whenever they move (asking everything would be 3 n_pts)
+    extra = s2.collider.asked - (n_pts + 2 * n_contact)
+    assert 0 <= extra < 0.1 * n_pts
+    fresh = _CountingCollider().query(s2.points)
+    carried = s2._contacts()
+    assert np.array_equal(carried[0], fresh[0])
+    assert np.allclose(carried[3], fresh[3], atol=1e-9)
 
 
 def test_collisions_every_few_steps_still_stop_a_falling_sheet(garment):

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from engine.collide.maps import CollisionMaps
-from engine.collide.query import query_batch_serial
+from engine.collide.query import query_batch_serial, query_rows_serial
 
 
 def alloc_answers(collider, n: int) -> None:
@@ -26,6 +26,8 @@ class MapCollider:
     Output arrays are reused between calls (one call per simulation step); set_maps() swaps
     in a new body frame's maps (walking)."""
 
+    depth_along_z = True  # depth is measured along z (query.py), not along the normal
+
     def __init__(self, maps: CollisionMaps, tol: float | None = None):
         self.maps = maps
         self.tol = float(maps.tol if tol is None else tol)
@@ -44,4 +46,13 @@ class MapCollider:
             self._alloc(points.shape[0])
         query_batch_serial(points, self.tol, *self.maps.kernel_args(), self.status, self.surface, self.depth,
                     self.normal, self.velocity, self.map_index)
+        return self.status, self.normal, self.velocity, self.depth
+
+    def query_rows(self, points: np.ndarray, rows: np.ndarray, n_rows: int):
+        """Answer only points[rows[:n_rows]], into those rows of the outputs (the cloth solver
+        keeps the other points' answers, ClothSolver._contacts)."""
+        if points.shape[0] != self._n:
+            return self.query(points)
+        query_rows_serial(points, rows, n_rows, self.tol, *self.maps.kernel_args(), self.status, self.surface,
+                          self.depth, self.normal, self.velocity, self.map_index)
         return self.status, self.normal, self.velocity, self.depth

@@ -94,6 +94,8 @@ def _query_cached(local, t, frame, tol, widened, shift_t, root_v, vmax, reach, m
 class TrackCollider:
     """Cloth points against a BodyTrack, through per-frame collision maps."""
 
+    solver_carries = False  # the body moves every step; it carries answers itself (_query_cached)
+
     def __init__(self, track: BodyTrack, renderer: MapRenderer, tol: float, keep: bool = True,
                  compact: bool = True):
         """keep: keep each frame's maps for reuse (a periodic track); compact: keep them as float16."""
@@ -200,6 +202,8 @@ class TrackObjectCollider:
     """The object-space baseline on a moving body: the BVH over the body triangles is refitted
     to the nearest frame (relative to the root, like the maps), points move into the root's
     frame, and the surface between frames moves along its velocity as in TrackCollider."""
+
+    solver_carries = False  # the body moves every step
 
     def __init__(self, track: BodyTrack, tol: float):
         from engine.collide.bvh import ObjectSpaceCollider

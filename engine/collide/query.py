@@ -212,6 +212,19 @@ def query_batch_serial(points, tol, surf, vel, has_vel, kind, side_src, geom, la
                          velocity, map_index)
 
 
+@serial_kernel(fastmath=False)
+def query_rows_serial(points, rows, n_rows, tol, surf, vel, has_vel, kind, side_src, geom, layout,
+                      status, surface, penetration, normal, velocity, map_index):
+    """query_batch_serial for the points listed in rows[:n_rows] only: the other rows of the
+    outputs keep what they hold (the cloth solver asks again only for the points whose answer
+    may have changed, see ClothSolver._contacts)."""
+    for i in range(n_rows):
+        p = rows[i]
+        query_point_into(points[p, 0], points[p, 1], points[p, 2], tol, surf, vel, has_vel,
+                         kind, side_src, geom, layout, p, status, surface, penetration, normal,
+                         velocity, map_index)
+
+
 @dataclass
 class QueryResult:
     """status: (N,) int8, 0 clear / 1 band / 2 inside; surface: (N, 3) float64 surface point;
