@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -28,6 +30,33 @@ def test_skin_fast_matches_reference(female):
     assert np.abs(fast - ref).max() < 1e-9
     # and the pose really moved the body (the test is not comparing two rest poses)
     assert np.abs(ref - female.vertices).max() > 0.1
+
+
+def test_pose_joints_composes_the_chain(female):
+    """Each joint: its parent's posed transform, times its rest offset from the parent, times
+    its delta (a rotation about itself in the rest pose's world axes) -- composed here one joint
+    at a time, as the reference for the compiled chain."""
+    rig = female.rig
+    deltas = gait_deltas(0.61, 1.3, 0.7)
+    rest = rig.rest_transforms
+    names = {n: i for i, n in enumerate(rig.joint_names)}
+    ref = np.empty_like(rest)
+    for j in range(len(rest)):
+        p = rig.parents[j]
+        m = rest[j] if p < 0 else ref[p] @ np.linalg.inv(rest[p]) @ rest[j]
+        name = rig.joint_names[j]
+        if name in deltas:
+            d = np.eye(4)
+            rr = rest[j, :3, :3]
+            d[:3, :3] = rr.T @ deltas[name] @ rr
+            m = m @ d
+        ref[j] = m
+    assert set(deltas) <= set(names)
+    np.testing.assert_allclose(pose_joints(rig, deltas), ref, atol=1e-12)
+    # a skeleton that lists a child before its parent is refused
+    bad = replace(rig, parents=np.where(np.arange(len(rig.parents)) == 1, 5, rig.parents).astype(np.int32))
+    with pytest.raises(InputError, match="before its parent"):
+        pose_joints(bad, deltas)
 
 
 def test_rest_pose_is_identity(female):

@@ -40,6 +40,7 @@ import numpy as np
 from engine.body.rig import _skin_kernel, joint_matrices
 from engine.body.types import SEGMENT_ID, Body, Rig
 from engine.errors import InputError
+from engine.jit import serial_kernel
 
 FINE = 16  # planting grid: steps per frame
 START_PHASE = 0.3  # the walk starts at the left leg's mid-stance
@@ -165,37 +166,53 @@ def gait_deltas(phase: float, amp: float, weight: float) -> dict[str, np.ndarray
 
 def pose_joints(rig: Rig, deltas: dict[str, np.ndarray]) -> np.ndarray:
     """(J, 4, 4) posed world transforms: each named joint rotated about itself by its delta
-    (in the rest pose's world axes), children following."""
+    (in the rest pose's world axes), children following (a walk poses the skeleton thousands
+    of times: the chain's products run compiled, _chain_product)."""
     rest = rig.rest_transforms
-    idx = {n: i for i, n in enumerate(rig.joint_names)}
-    d = {}
+    local, parent, index = _chain(rig)
+    link = local.copy()  # each joint's transform from its parent's frame (the world's for a root)
     for name, r in deltas.items():
-        j = idx[name]
+        j = index[name]
         rr = rest[j, :3, :3]
-        t = np.eye(4)
-        t[:3, :3] = rr.T @ r @ rr
-        d[j] = t
-    local = _local_rest(rig)
+        link[j, :, :3] = link[j, :, :3] @ (rr.T @ r @ rr)  # link @ [[rr^T r rr, 0], [0, 1]]
     g = np.empty_like(rest)
-    for j in range(len(rest)):
-        p = rig.parents[j]
-        m = rest[j] if p < 0 else g[p] @ local[j]
-        g[j] = m @ d[j] if j in d else m
+    _chain_product(link, parent, g)
     return g
 
 
-def _local_rest(rig: Rig) -> np.ndarray:
-    """Each joint's rest transform relative to its parent (J, 4, 4), kept on the rig (computed
-    once: pose_joints is called for every pose of a walk)."""
-    cached = rig.__dict__.get("_local_rest")
+@serial_kernel
+def _chain_product(link, parent, g):
+    """g[j] = g[parent[j]] @ link[j] down the chain (a root's g is its link); parents first."""
+    for j in range(link.shape[0]):
+        p = parent[j]
+        if p < 0:
+            for r in range(4):
+                for c in range(4):
+                    g[j, r, c] = link[j, r, c]
+            continue
+        for r in range(4):
+            for c in range(4):
+                s = 0.0
+                for k in range(4):
+                    s += g[p, r, k] * link[j, k, c]
+                g[j, r, c] = s
+
+
+def _chain(rig: Rig):
+    """(local (J, 4, 4): each joint's rest transform relative to its parent -- the rest
+    transform itself for a root --, parents, name -> index), kept on the rig (computed once)."""
+    cached = rig.__dict__.get("_chain")
     if cached is None or cached[0] is not rig.rest_transforms:
         rest = rig.rest_transforms
+        parent = np.asarray(rig.parents, dtype=np.int64)
         local = np.empty_like(rest)
         for j in range(len(rest)):
-            p = rig.parents[j]
+            p = parent[j]
+            if p >= j:
+                raise InputError(f"the skeleton lists joint {rig.joint_names[j]} before its parent")
             local[j] = rest[j] if p < 0 else np.linalg.inv(rest[p]) @ rest[j]
-        cached = (rest, local)
-        rig.__dict__["_local_rest"] = cached
+        cached = (rest, (local, parent, {n: i for i, n in enumerate(rig.joint_names)}))
+        rig.__dict__["_chain"] = cached
     return cached[1]
 
 
