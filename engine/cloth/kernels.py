@@ -96,20 +96,24 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, springs, rest, k, spring_c, 
 
 
 @serial_kernel
-def stale_contacts(points, q_points, q_status, q_normal, q_depth, status, depth, reach, slack, rows, z_depth):
+def stale_contacts(points, q_points, g_points, q_status, q_normal, q_depth, status, depth, reach, slack, rows,
+                   z_depth):
     """Between two map queries: carry each checked point's last answer forward, its depth
-    corrected by how far it moved along the normal since the query (a point that left the band
-    becomes clear). Returns -1 when the answers may be stale: a point moved more than `reach`,
-    or a point that was clear moved farther than its distance from the band (q_depth < 0 is
-    minus that distance) plus `slack` -- so nothing gets deeper than `slack` into the band
-    unseen (the response only pushes in the band's inner half). Else returns 0 -- or, when
-    `rows` is not empty (a collider that can answer some points alone), such clear points do
-    not make every answer stale: they are listed in `rows` and their count is returned.
+    corrected by how far it moved along the normal since its answer (a point that left the band
+    becomes clear). Returns -1 when the answers may be stale: a point moved more than `reach`
+    since the last query of all (g_points), or a point that was clear moved farther than its
+    distance from the band (q_depth < 0 is minus that distance) plus `slack` since its answer
+    (q_points) -- so nothing gets deeper than `slack` into the band unseen (the response only
+    pushes in the band's inner half). Else returns 0 -- or, when `rows` is not empty (a
+    collider that can answer some points alone), such clear points do not make every answer
+    stale: they are listed in `rows` and their count is returned.
     z_depth: the collider measures depth along z, as the maps do (see _depth_rate)."""
     r2 = reach * reach
     own = rows.shape[0] > 0
     k = 0
     for p in range(points.shape[0]):
+        if _moved(points, g_points, p)[3] > r2:
+            return -1
         dx, dy, dz, d2 = _moved(points, q_points, p)
         st = q_status[p]
         if st == 0:
@@ -120,8 +124,6 @@ def stale_contacts(points, q_points, q_status, q_normal, q_depth, status, depth,
                 k += 1
             status[p] = 0
             continue
-        if d2 > r2:
-            return -1
         move_n = dx * q_normal[p, 0] + dy * q_normal[p, 1] + dz * q_normal[p, 2]
         d = q_depth[p] - move_n * _depth_rate(q_normal[p, 2], z_depth)
         depth[p] = d
