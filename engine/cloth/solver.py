@@ -132,16 +132,18 @@ class ClothSolver:
     def _contacts(self):
         """The collider's answer for self.points. Asking the maps is the costliest part of a step,
         and at the eq. 4 time step a point moves a fraction of a millimetre per step, so the last
-        answer is carried forward (depth corrected for the move along the normal, K.stale_contacts) until a
-        point moved `requery_move` since the last query, a clear point moved as far as it was
-        from the band, `requery_every` steps passed, or the body moved (the collider's version
-        changed). Then a collider with `query_rows` is asked only for the points whose answer
-        may have changed (K.rows_to_ask: those in contact, and clear points that moved as far
-        as their distance from the band); the others stay clear; and between two such queries
-        a clear point that may have reached the band is asked alone. (Measured: asking the
-        contacts only every `requery_every` steps, with clear points asked alone, left kinks
-        at the male trousers' knees; the contacts are asked as often as before.) A collider with `solver_carries` False (a body that
-        moves every step) is asked every time and nothing is kept."""
+        answer is carried forward (depth corrected for the move along the normal,
+        K.stale_contacts) until a point moved `requery_move` since the last query, a clear point
+        moved as far as it was from the band, `requery_every` steps passed, or the body moved
+        (the collider's version changed).
+        A collider with `query_rows` is then asked only for the points whose answer may have
+        changed (K.rows_to_ask: those in contact, and clear points that moved as far as their
+        distance from the band); the others stay clear. Between two such queries a clear point
+        that may have reached the band is asked alone. (Measured: asking the contacts only every
+        `requery_every` steps instead left kinks at the male trousers' knees; they are asked
+        as often as before.)
+        A collider with `solver_carries` False (a body that moves every step) is asked every
+        time and nothing is kept."""
         p = self.model.params
         c = self.collider
         ver = getattr(c, "version", None)
