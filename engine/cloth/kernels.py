@@ -396,6 +396,14 @@ def _corner(p, r, n, nq, quads, tris):
 
 
 @njit(fastmath=True, cache=True, inline="always")
+def _report_contact(i, p, normal, body_v, contact_n, vbody_out):
+    """Vertex i touches the body through checked point p: keep p's normal and body velocity."""
+    for c in range(3):
+        contact_n[i, c] = normal[p, c]
+        vbody_out[i, c] = body_v[p, c]
+
+
+@njit(fastmath=True, cache=True, inline="always")
 def _point_mean(a, p, n, nq, quads, tris):
     """A per-vertex field (N, 3) at checked point p: the vertex's value, or its face's mean."""
     if p < n:
@@ -494,12 +502,7 @@ def collision_response(v, status, normal, body_v, depth, pv, n_vertices, quads, 
             acc[i, 2] += rz
             cnt[i] += 1
             contact[i] = True
-            contact_n[i, 0] = normal[p, 0]
-            contact_n[i, 1] = normal[p, 1]
-            contact_n[i, 2] = normal[p, 2]
-            vbody_out[i, 0] = body_v[p, 0]
-            vbody_out[i, 1] = body_v[p, 1]
-            vbody_out[i, 2] = body_v[p, 2]
+            _report_contact(i, p, normal, body_v, contact_n, vbody_out)
     for i in range(n):
         if cnt[i] > 0:
             v[i, 0] = acc[i, 0] / cnt[i]
@@ -544,12 +547,7 @@ def contact_rounds(v, springs, mode, gravity, dt, passes, work, geo, recover, n_
                 contact[i] = True
                 touched_buf[n_touch] = i
                 n_touch += 1
-            contact_n[i, 0] = normal[p, 0]
-            contact_n[i, 1] = normal[p, 1]
-            contact_n[i, 2] = normal[p, 2]
-            vbody_out[i, 0] = body_v[p, 0]
-            vbody_out[i, 1] = body_v[p, 1]
-            vbody_out[i, 2] = body_v[p, 2]
+            _report_contact(i, p, normal, body_v, contact_n, vbody_out)
     acc = np.empty((n, 3))
     cnt = np.empty(n, dtype=np.int32)
     for rnd in range(rounds):
