@@ -73,6 +73,42 @@ def test_track_collider_moves_the_surface_between_frames(in_offsets):
         r.release()
 
 
+def test_track_collider_carries_a_contact_as_the_maps_measure_it():
+    """A contact answer carried between map queries changes as a fresh query's would: the maps
+    measure penetration along z, so on a face whose normal has n_z = 0.6 a point moved 1 mm out
+    along the normal is 1 / 0.6 mm less deep (carried as a distance, it was off by 0.67 mm)."""
+    m = trimesh.creation.box(extents=(0.4, 0.15, 0.4))
+    for _ in range(4):  # fine triangles: the smooth normals are the face's away from its edges
+        m = m.subdivide()
+    v = np.asarray(m.vertices, np.float64) + (0.0, 0.075, 0.0)
+    v[:, 2] -= (v[:, 2] + 0.2) / 0.4 * v[:, 1] / 0.15 * 0.2  # the front slopes back: normal (0, 0.8, 0.6)
+    body = Body(v, np.asarray(m.faces, np.int32))
+    fr = np.repeat(body.vertices[None].astype(np.float32), 3, axis=0)
+    track = BodyTrack(body=body, fps=10.0, frames=fr, vel=np.zeros_like(fr), offsets=np.zeros((3, 3)), cycle_start=0,
+                      cycle_frames=0, shift=np.zeros(3), notes=[])
+    n = np.array([0.0, 0.8, 0.6])
+    p0 = np.array([[0.05, 0.075, 0.1]]) + 0.002 * n  # 2 mm off the face: in the 5 mm band
+    p1 = p0 + 0.001 * n
+    col, r = _collider(track)
+    fresh, r2 = _collider(track)
+    try:
+        col.set_time(0.1)
+        st, nn, _, d0 = col.query(p0)
+        assert st[0] == 1 and abs(nn[0] @ n - 1.0) < 0.02
+        d0 = float(d0[0])
+        col.set_time(0.1005)
+        st, _, _, d1 = col.query(p1)
+        d1 = float(d1[0])
+        assert col.stats["asked"] == 1  # the second answer was carried, not asked
+        fresh.set_time(0.1005)
+        _, _, _, df = fresh.query(p1)
+        assert abs((d0 - float(df[0])) - 0.001 / 0.6) < 0.0004  # the maps' own answer ...
+        assert abs(d1 - float(df[0])) < 0.0003, (d0, d1, float(df[0]))  # ... and the carried one
+    finally:
+        r.release()
+        r2.release()
+
+
 def test_track_collider_reuses_maps_of_a_periodic_track():
     track = _sliding_box_track(0.0, frames=4)
     track.cycle_start, track.cycle_frames = 1, 3

@@ -41,6 +41,7 @@ from engine.jit import serial_kernel
 REACH = 0.002  # m: a point that moved this far (in the root's frame) since its answer asks again
 MAX_AGE = 0.002  # s: ... and so does an answer this old
 SLACK = 0.0005  # m: a clear point may come this close to the band before it asks again
+MIN_NZ = 0.2  # a carried penetration changes at most 1 / MIN_NZ x the normal motion
 
 
 @serial_kernel
@@ -64,7 +65,11 @@ def _query_cached(local, t, frame, tol, widened, shift_t, root_v, vmax, reach, m
         if fresh and status[p] == 0:
             fresh = moved + vmax * age < -c_pen[p] - slack
         if fresh and status[p] != 0:
-            pen = c_pen[p] + c_un[p] * age - (dx * normal[p, 0] + dy * normal[p, 1] + dz * normal[p, 2])
+            # the maps' penetration is measured along z: it changes by the normal motion / |n_z|
+            # (capped); a side-layer answer (n_z = 0) is a distance (as cloth.kernels._depth_rate)
+            nz = abs(normal[p, 2])
+            rate = 1.0 if nz == 0.0 else 1.0 / max(nz, MIN_NZ)
+            pen = c_pen[p] + (c_un[p] * age - (dx * normal[p, 0] + dy * normal[p, 1] + dz * normal[p, 2])) * rate
             penetration[p] = pen
             status[p] = 2 if pen > tol else (1 if pen > 0.0 else 0)
             if status[p] == 0:
