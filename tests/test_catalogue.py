@@ -67,3 +67,21 @@ def test_placement_keeps_panels_near_their_flat_lengths(body, garment, worst, p9
     strain = (np.linalg.norm(x[a] - x[b], axis=1) / m.rest - 1)[m.kind == STRUCTURAL]
     assert strain.max() < worst, f"placed {garment} stretched {100 * strain.max():.0f} %"
     assert np.percentile(strain, 99) < p99
+
+
+def test_size_chart_follows_the_body_not_its_file_name(tmp_path):
+    """The default bodies keep their own chart; a scan gets the men's chart by its waist-to-hip
+    ratio, whatever its file is called (the service stores uploads as body-<id>)."""
+    from engine.body import resolve_body
+    from engine.body.types import Body
+    from engine.pattern.catalogue import chart_of
+    from tests.samples import SAMPLE_BODY
+
+    male, female = resolve_body("default:male"), resolve_body("default:female")
+    assert chart_of(male) == "men" and chart_of(female) == "women"
+    for name in ("body-1234", "female_scan", "male_scan"):
+        assert chart_of(Body(male.vertices, male.faces, name=name)) == "men", name
+        assert chart_of(Body(female.vertices, female.faces, name=name)) == "women", name
+    assert chart_of(resolve_body(str(SAMPLE_BODY))) == "women"  # the sample scan, a woman
+    _, _, label = make_garment("skirt", Body(male.vertices, male.faces, name="body-1234"), "M")
+    assert label == "skirt (M, men's chart)"

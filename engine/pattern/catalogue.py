@@ -11,6 +11,12 @@ XS 86/74/88, S 92/80/94, M 98/86/100, L 104/92/106, XL 110/98/112, XXL 116/106/1
 Ease (garment girth minus body girth) after W. Aldrich, "Metric Pattern Cutting for Women's
 Wear", 6th ed. (2015), block tables: fitted skirt waist +2, hips +4; semi-fitted dress bust
 +8, waist +6, hips +6; shirt/blouse bust +10, hips +8; trousers waist +2, hips +6.
+Which chart: the default bodies' own (default:female / default:male); any other body (a scan,
+an uploaded animation) by its waist-to-hip girth ratio, MEN_RATIO or more for the men's chart
+(the charts' own ratios at M are 0.74 and 0.86; measured: default:female 0.68, the sample scan
+0.76, default:male 0.81-0.87 by weight). A file's name does not choose it: the same scan got
+the men's chart as "anim_male.zip" and the women's as the service's "body-<id>.zip", whose
+M skirt could not be sewn around a man's waist.
 Armhole (scye) depth below the shoulder: 0.12 x height for women (Aldrich's women's block,
 21 cm at 164 cm), 0.14 x height for men (his men's blocks, ~24-25 cm at 176 cm: a deeper
 armhole for the thicker arm root; 0.12 measured 22-33 % strain at the male armpit).
@@ -35,6 +41,7 @@ from engine.pattern import geometry as geo
 from engine.pattern.spec import PanelHint, PatternSpec
 
 SIZES = ("XS", "S", "M", "L", "XL", "XXL")
+MEN_RATIO = 0.80  # waist / hips at or above which a body that is not a default one gets the men's chart
 SCYE_WOMEN, SCYE_MEN = 0.12, 0.14  # armhole depth below the shoulder point, x height
 WOMEN = {"XS": (82, 64, 90), "S": (86, 68, 94), "M": (92, 74, 100), "L": (98, 80, 106),
          "XL": (104, 86, 112), "XXL": (110, 93, 118)}
@@ -155,14 +162,26 @@ class Fit:
     men: bool = False
 
 
+def chart_of(body: Body, m=None) -> str:
+    """'women' or 'men': the size chart for this body (module doc)."""
+    if body.name.startswith("default:"):
+        return "men" if body.name.split(",")[0] == "default:male" else "women"
+    if m is None:
+        from engine.body.measure import measure
+
+        m = measure(body)
+    ratio = m.waist / m.hips
+    return "men" if np.isfinite(ratio) and ratio >= MEN_RATIO else "women"
+
+
 def _fit(body: Body, size: str) -> Fit:
     from engine.body.measure import measure
 
     if size not in SIZES:
         raise InputError(f"size '{size}': choose one of {', '.join(SIZES)}")
-    chart = MEN if "male" in body.name and "female" not in body.name else WOMEN
-    bust, waist, hips = chart[size]
     m = measure(body)
+    chart = MEN if chart_of(body, m) == "men" else WOMEN
+    bust, waist, hips = chart[size]
     need = {"shoulder_height": m.shoulder_height, "waist_height": m.waist_height, "hip_height": m.hip_height,
             "crotch_height": m.crotch_height, "knee_height": m.knee_height}
     bad = [k for k, v in need.items() if not np.isfinite(v)]
@@ -470,7 +489,8 @@ def make_garment(name: str, body: Body, size: str = "M"):
 
     if name not in CATALOGUE:
         raise InputError(f"unknown garment '{name}'; the catalogue has: {', '.join(CATALOGUE)}")
-    made = CATALOGUE[name][0](_fit(body, size))
+    fit = _fit(body, size)
+    made = CATALOGUE[name][0](fit)
     sections = BodySections(body, cover=name in ("shirt", "trousers"))
     scale = made.spec.scale
     outlines = {n: geo.outline(p, scale) for n, p in made.spec.pattern.panels.items()}
@@ -484,7 +504,7 @@ def make_garment(name: str, body: Body, size: str = "M"):
         hint = made.hints[pname]
         return wrap_torso(uv, hint, sections, made.tops[pname] / 100.0, outlines[pname], clamp_y=made.clamp_y)
 
-    return made.spec, place, f"{name} ({size})"
+    return made.spec, place, f"{name} ({size}, {'men' if fit.men else 'women'}'s chart)"
 
 
 def _row_widths(outline: np.ndarray, vs: np.ndarray, u_min: float = -np.inf) -> np.ndarray:
