@@ -18,7 +18,7 @@ from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Literal
 
-from fastapi import Cookie, Depends, FastAPI, File, Header, HTTPException, Query, Request, UploadFile, WebSocket
+from fastapi import Cookie, Depends, FastAPI, File, Form, Header, HTTPException, Query, Request, UploadFile, WebSocket
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
@@ -30,7 +30,7 @@ from app.settings import Settings
 from app.worker import job_dir
 
 WEB = Path(__file__).resolve().parents[1] / "web"
-BODY_EXT = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+BODY_EXT = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf", ".zip")  # .zip: OBJ frames (an animation)
 RESULT_FILES = ("scene.glb", "garment.obj", "front.png", "side.png", "back.png", "report.json", "anim.glb",
                 "strip.png", "recording.viser")
 VIEWER_COOKIE = "tryon_viewer"
@@ -137,25 +137,41 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
         return {"id": row["id"], "kind": row["kind"], "name": row["name"], "info": json.loads(row["info"] or "{}")}
 
     @app.post("/api/bodies", status_code=201)
-    async def upload_body(file: UploadFile = File(...), who: str = Depends(owner)):
+    async def upload_body(file: UploadFile = File(...), fps: float = Form(30.0), who: str = Depends(owner)):
+        """A scan (a mesh file), or an animated body: a .zip of OBJ frames (one topology) played
+        at `fps`, or a .glb with a morph-target or skinned animation sampled at `fps`. An
+        animated body is dressed on its first frame and, with motion "walk", moves as uploaded."""
         from engine.errors import TryonError
 
         ext = Path(file.filename or "").suffix.lower()
         if ext not in BODY_EXT:
             raise HTTPException(400, f"body file type '{ext or 'none'}' is not supported: give one of {' '.join(BODY_EXT)}")
+        if not (math.isfinite(fps) and 1.0 <= fps <= 240.0):
+            raise HTTPException(422, f"fps {fps:g}: give the animation's frame rate, 1 .. 240")
         bid = new_id()
         dest = s.data_dir / "uploads" / f"body-{bid}{ext}"  # our name, never the client's
         await save_upload(file, dest)
         try:
-            from engine.body.load import load_body_file
+            from engine.body.gltf_anim import has_animation
 
-            b = load_body_file(dest)
+            if ext == ".zip" or (ext in (".glb", ".gltf") and has_animation(dest)):
+                from engine.body.animation import load_animation
+
+                track = load_animation(dest, fps)
+                b, kind = track.body, "animation"
+                n = int(track.frames.shape[0])
+                info = {"frames": n, "fps": fps, "seconds": round((n - 1) / fps, 3), "notes": list(track.notes)}
+            else:
+                from engine.body.load import load_body_file
+
+                b, kind, info = load_body_file(dest), "upload", {"notes": None}
         except TryonError as e:
             dest.unlink(missing_ok=True)
             raise HTTPException(400, str(e).replace(dest.name, file.filename or dest.name)) from None
-        info = {"height_m": round(b.height, 4), "vertices": int(len(b.vertices)), "notes": b.notes}
+        info = {"height_m": round(b.height, 4), "vertices": int(len(b.vertices)), **info,
+                "notes": info["notes"] if info["notes"] is not None else b.notes}
         name = Path(file.filename or "scan").stem[:80]
-        db.run("INSERT INTO bodies VALUES (?,?,?,?,?,?,?)", bid, who, "upload", str(dest), name, time.time(),
+        db.run("INSERT INTO bodies VALUES (?,?,?,?,?,?,?)", bid, who, kind, str(dest), name, time.time(),
                json.dumps(info))
         return body_out(db.one("SELECT * FROM bodies WHERE id=?", bid))
 
@@ -187,7 +203,7 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
     @app.delete("/api/bodies/{bid}", status_code=204)
     def delete_body(bid: str, who: str = Depends(owner)):
         row = owned("bodies", bid, who)
-        if row["kind"] == "upload":
+        if row["kind"] in ("upload", "animation"):
             Path(row["spec"]).unlink(missing_ok=True)
         db.run("DELETE FROM bodies WHERE id=?", bid)
 
@@ -258,7 +274,12 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
             raise HTTPException(422, "give either body_id (a body you created) or body (e.g. default:female)")
         if req.body_id is not None:
             row = owned("bodies", req.body_id, who)
-            body = {"spec": row["spec"]} if row["kind"] == "default" else {"file": row["spec"]}
+            if row["kind"] == "default":
+                body = {"spec": row["spec"]}
+            elif row["kind"] == "animation":
+                body = {"animation": row["spec"], "fps": json.loads(row["info"])["fps"]}
+            else:
+                body = {"file": row["spec"]}
         else:
             if not req.body.startswith("default:"):
                 raise HTTPException(422, "body: only default bodies by name (default:female, default:male); "

@@ -1,8 +1,9 @@
 """A worker process: takes queued try-ons from the database, runs them with the engine, writes
 their results and status. Started with multiprocessing's spawn (never fork after a GL context).
 
-A try-on's request (JSON, resolved by the API): body {"spec": "default:female,..."} or
-{"file": path}; garment {"name": catalogue name} or {"file": pattern path}; size, fabric,
+A try-on's request (JSON, resolved by the API): body {"spec": "default:female,..."},
+{"file": path} or {"animation": path, "fps": rate} (dressed on its first frame; with motion
+"walk" it moves as uploaded); garment {"name": catalogue name} or {"file": pattern path}; size, fabric,
 motion ("none" or "walk"), seconds, resolution_cm. Results go to DATA/jobs/<id>/.
 """
 
@@ -85,7 +86,14 @@ def _run(req: dict, out: Path, progress, live=None) -> dict:
 
     progress("body", 0.0, "loading the body")
     b = req["body"]
-    body = resolve_body(b["spec"] if "spec" in b else b["file"])
+    track = None
+    if "animation" in b:
+        from engine.body.animation import load_animation
+
+        track = load_animation(b["animation"], float(b.get("fps", 30.0)))
+        body = track.body
+    else:
+        body = resolve_body(b["spec"] if "spec" in b else b["file"])
     g = req["garment"]
     if "name" in g:
         spec, place, name = resolve_garment(g["name"], body, req.get("size") or "M")
@@ -100,12 +108,12 @@ def _run(req: dict, out: Path, progress, live=None) -> dict:
     try:
         if live is not None:
             live(view.port)
-        return _simulate(req, body, spec, place, name, fabric, walking, out, progress, view)
+        return _simulate(req, body, spec, place, name, fabric, walking, out, progress, view, track)
     finally:
         view.close()
 
 
-def _simulate(req, body, spec, place, name, fabric, walking, out, progress, view) -> dict:
+def _simulate(req, body, spec, place, name, fabric, walking, out, progress, view, track=None) -> dict:
     from engine.scene.drape import DrapeOptions
     from engine.scene.tryon import run_tryon, write_outputs
 
@@ -117,9 +125,11 @@ def _simulate(req, body, spec, place, name, fabric, walking, out, progress, view
     if walking:
         from engine.scene.walk import WalkOptions, walk_cloth, walk_report, walking_body, write_walk_outputs
 
-        walker = walking_body(body)  # a scan walks with the default skeleton fitted to it
-        w = walk_cloth(walker, res, WalkOptions(seconds=req.get("seconds", 4.0)), texel=0.005,
-                       tol=res.model.params.tolerance, progress=progress, observer=view)
+        # an uploaded animation moves as uploaded; a scan walks with the default skeleton fitted to it
+        walker = body if track is not None else walking_body(body)
+        wo = WalkOptions(seconds=req.get("seconds", 4.0), **({"fps": track.fps} if track is not None else {}))
+        w = walk_cloth(walker, res, wo, texel=0.005, tol=res.model.params.tolerance, progress=progress,
+                       observer=view, track=track)
         report = walk_report(report, w.report)
         write_walk_outputs(out, walker, w, report)
     view.save(out / "recording.viser")

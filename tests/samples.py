@@ -7,3 +7,17 @@ SAMPLES = ROOT.parent / "shared" / "samples" / "garmentcode"
 SAMPLE_BODY = SAMPLES / "mean_female.obj"
 SAMPLE_YAML = SAMPLES / "mean_female.yaml"
 SAMPLE_SKIRT = SAMPLES / "flare_skirt_specification.json"
+
+
+def write_anim_zip(path, frames, faces, names=None):
+    """An uploaded animation: a zip of OBJ frames (vertices (V, 3) per frame, shared faces)."""
+    import io
+    import zipfile
+
+    with zipfile.ZipFile(path, "w") as z:
+        for k, v in enumerate(frames):
+            buf = io.StringIO()
+            buf.write("".join(f"v {x:.6f} {y:.6f} {zz:.6f}\n" for x, y, zz in v))
+            buf.write("".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces))
+            z.writestr(names[k] if names else f"frames/f_{k:03d}.obj", buf.getvalue())
+    return path

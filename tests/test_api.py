@@ -9,7 +9,7 @@ from fastapi.testclient import TestClient
 
 from app.main import create_app
 from app.settings import Settings
-from tests.samples import SAMPLE_BODY, SAMPLE_SKIRT
+from tests.samples import SAMPLE_BODY, SAMPLE_SKIRT, write_anim_zip
 
 
 def _settings(tmp_path, **kw):
@@ -150,6 +150,40 @@ def test_tryon_runs_to_the_end(tmp_path):
         glb = c.get(j["files"]["scene.glb"], headers=h)
         assert glb.content[:4] == b"glTF"
         assert c.get(f"/api/tryons/{j['id']}/files/..%2Fjobs.sqlite", headers=h).status_code == 404
+
+
+def test_animated_body_upload_moves_as_uploaded(tmp_path):
+    """An uploaded animation (a zip of OBJ frames) is a body of its own kind; a walking try-on on
+    it is dressed on the first frame and moves with the upload's frames, at the rate given."""
+    from engine.body.default import default_body
+    from engine.body.motion import WalkParams, walk_track
+
+    body = default_body("female")
+    tr = walk_track(body, WalkParams(), fps=15)
+    zp = write_anim_zip(tmp_path / "walk.zip", [tr.vertices(i) for i in range(8)], body.faces)
+    with TestClient(create_app(_settings(tmp_path))) as c:
+        h = token(c)
+        with open(zp, "rb") as f:
+            r = c.post("/api/bodies", files={"file": ("my walk.zip", f)}, data={"fps": "15"}, headers=h)
+        assert r.status_code == 201, r.text
+        b = r.json()
+        assert b["kind"] == "animation" and b["info"]["frames"] == 8 and b["info"]["fps"] == 15
+        r = c.post("/api/bodies", files={"file": ("bad.zip", b"not a zip")}, headers=h)
+        assert r.status_code == 400 and "bad.zip" in r.json()["error"]
+        with open(zp, "rb") as f:
+            r = c.post("/api/bodies", files={"file": ("w.zip", f)}, data={"fps": "0"}, headers=h)
+        assert r.status_code == 422 and "fps" in r.json()["error"]
+        r = c.post("/api/tryons", json={"body_id": b["id"], "garment": "skirt", "resolution_cm": 3,
+                                        "motion": "walk", "seconds": 2.0}, headers=h)
+        j = wait(c, h, r.json()["id"])
+        assert j["status"] == "done", j
+        rep = j["report"]
+        assert rep["frames"] == 7 and rep["fps"] == 15  # the upload's 8 frames at its rate, not a 2 s walk
+        assert any("animation ends" in line for line in rep["left_out"])
+        glb = c.get(j["files"]["anim.glb"], headers=h)
+        assert glb.status_code == 200 and glb.content[:4] == b"glTF"
+        assert c.delete(f"/api/bodies/{b['id']}", headers=h).status_code == 204
+        assert not list((c.app.state.settings.data_dir / "uploads").glob(f"body-{b['id']}*"))
 
 
 def test_failed_tryon_reports_the_reason(tmp_path):

@@ -102,3 +102,46 @@ def test_page_dresses_the_default_avatar(server, tmp_path):
     cloth = _colour_share(img, (70, 110, 190), 60)
     assert body > 0.002 and cloth > 0.002, (body, cloth)
     assert errors == [], errors
+
+
+def test_page_plays_an_uploaded_animation(server, tmp_path):
+    """A user uploads a moving body (a zip of OBJ frames) through the page, at its frame rate,
+    with Motion "walking": the result is the animation, played as uploaded."""
+    from playwright.sync_api import sync_playwright
+
+    from engine.body.default import default_body
+    from engine.body.motion import WalkParams, walk_track
+    from tests.samples import write_anim_zip
+
+    body = default_body("male")
+    tr = walk_track(body, WalkParams(), fps=15)
+    zp = write_anim_zip(tmp_path / "my walk.zip", [tr.vertices(i) for i in range(8)], body.faces)
+    shots = ROOT / "out" / "page"
+    shots.mkdir(parents=True, exist_ok=True)
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=CHROMIUM, args=["--enable-unsafe-swiftshader"])
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        errors = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(server + "/")
+        page.wait_for_selector("#garment option[value=skirt]", state="attached")
+        page.check("input[name=bodykind][value=scan]")
+        page.set_input_files("#scan", str(zp))
+        page.fill("#fps", "15")
+        page.select_option("#garment", "skirt")
+        page.select_option("#motion", "walk")
+        page.select_option("#quality", "3")
+        page.click("#tryon")
+        page.wait_for_function("(t => t.startsWith('Done') || t.startsWith('The try-on '))"
+                               "(document.getElementById('status').textContent)", timeout=240_000)
+        text = page.inner_text("#status")
+        assert text.startswith("Done"), text
+        page.wait_for_selector("#results img[alt='strip.png']")
+        page.screenshot(path=str(shots / "4-animation.png"))
+        link = page.locator("#download-anim-glb")
+        assert link.count() == 1
+        with page.expect_download() as d:
+            link.click()
+        assert open(d.value.path(), "rb").read(4) == b"glTF"
+        browser.close()
+    assert errors == [], errors

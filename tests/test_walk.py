@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 from engine.body.motion import BodyTrack
 from engine.body.types import Body
 from engine.cli import app
-from tests.samples import SAMPLE_BODY
+from tests.samples import SAMPLE_BODY, write_anim_zip
 
 
 def _box_body(size=0.4):
@@ -248,19 +248,6 @@ def test_walk_cli_refuses_bad_input(tmp_path, monkeypatch, args, words):
     assert not (tmp_path / "o" / "anim.glb").exists()
 
 
-def _anim_zip(path, frames, faces, names=None):
-    import io
-    import zipfile
-
-    with zipfile.ZipFile(path, "w") as z:
-        for k, v in enumerate(frames):
-            buf = io.StringIO()
-            buf.write("".join(f"v {x:.6f} {y:.6f} {zz:.6f}\n" for x, y, zz in v))
-            buf.write("".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces))
-            z.writestr(names[k] if names else f"frames/f_{k:03d}.obj", buf.getvalue())
-    return path
-
-
 @pytest.fixture(scope="module")
 def anim_zip(tmp_path_factory):
     from engine.body.default import default_body
@@ -269,7 +256,7 @@ def anim_zip(tmp_path_factory):
     body = default_body("female")
     tr = walk_track(body, WalkParams(), fps=30)
     frames = [tr.vertices(i) for i in range(20)]
-    return _anim_zip(tmp_path_factory.mktemp("anim") / "walk.zip", frames, body.faces), frames
+    return write_anim_zip(tmp_path_factory.mktemp("anim") / "walk.zip", frames, body.faces), frames
 
 
 def test_load_animation(anim_zip):
@@ -291,14 +278,14 @@ def test_load_animation(anim_zip):
 def _two_topologies(p):
     import zipfile
 
-    _anim_zip(p, [np.eye(3), np.eye(3)], np.array([[0, 1, 2]]))
+    write_anim_zip(p, [np.eye(3), np.eye(3)], np.array([[0, 1, 2]]))
     with zipfile.ZipFile(p, "a") as z:  # a third frame with another mesh
         z.writestr("frames/f_002.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\n")
 
 
 @pytest.mark.parametrize("make, words", [
     (lambda p: p.write_text("not a zip"), "not a zip"),
-    (lambda p: _anim_zip(p, [np.eye(3)], np.array([[0, 1, 2]])), "at least 2"),
+    (lambda p: write_anim_zip(p, [np.eye(3)], np.array([[0, 1, 2]])), "at least 2"),
     (lambda p: _two_topologies(p), "topology"),
 ])
 def test_load_animation_refuses_bad_files(tmp_path, make, words):
