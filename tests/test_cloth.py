@@ -691,3 +691,21 @@ def test_contact_rounds_match_the_kernels_in_turn(mode, rounds):
     np.testing.assert_array_equal(out[1][2], out[0][2])
     np.testing.assert_array_equal(out[1][3], out[0][3])
     np.testing.assert_array_equal(out[1][4], out[0][4])
+
+
+@pytest.mark.parametrize("drape_min", [0.2, 0.6])
+def test_drape_ends_soon_after_the_cloth_settles(garment, drape_min):
+    """A sheet lying still on the floor has settled from the start: the drape ends at the first
+    test after `drape_min` with two full settle windows behind it (tested every fifth of a
+    window), not at the next whole window (0.75 s for drape_min 0.6, with 0.25 s windows)."""
+    from dataclasses import replace as dc_replace
+
+    from engine.scene.drape import DrapeOptions, sew_and_drape
+
+    flat = garment.positions.copy()
+    flat[:, 0], flat[:, 1], flat[:, 2] = garment.uv[:, 0], 0.003, garment.uv[:, 1]  # in the floor's band
+    g = dc_replace(garment, positions=flat)
+    res = sew_and_drape(g, _CountingCollider(), DrapeOptions(drape_min=drape_min, settle_time=0.25))
+    t = res.iterations["draping"] * res.model.dt_bound
+    assert res.settled
+    assert max(drape_min, 0.5) <= t <= max(drape_min, 0.5) + 0.05 + 1e-3, t

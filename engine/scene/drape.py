@@ -7,14 +7,17 @@ Stages end on measured conditions within a bounded budget of simulated time:
   and before the collision response); a pair closer than `weld_gap` is welded (moves as one
   point); when every pair is welded the sewn vertices are merged. If the budget runs out first,
   SimulationError names the seams that stayed open and their gaps.
-- drape: gravity on until the cloth's shape stops moving: RMS vertex displacement over
-  `settle_time`, as a speed, below `settle_speed` twice in a row. A garment left stretched more
+- drape: gravity (still growing where sewing ended before `gravity_ramp`) until the cloth's
+  shape stops moving: RMS vertex displacement over each of the last two `settle_time` windows,
+  as a speed, below `settle_speed` (tested every 1/SETTLE_CHECKS of a window, so a drape ends
+  within 0.05 s of settling, not up to a window later). A garment left stretched more
   than `too_tight` past the fabric's strain threshold is refused as too small (SimulationError).
 """
 
 from __future__ import annotations
 
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -27,6 +30,7 @@ from engine.cloth.welds import hold_welds, merge_map, seam_gaps
 from engine.errors import SimulationError
 from engine.garment.garment import Garment
 
+SETTLE_CHECKS = 5  # the settle test runs this many times a window (on the two windows just ended)
 Progress = Callable[[str, float, str], None]  # (stage, fraction 0..1, message)
 # (stage, cloth positions (N, 3), triangles (F, 3), body vertices (M, 3) or None when unchanged):
 # called every `observe_every` s of simulated time, e.g. to stream the cloth to a viewer
@@ -109,6 +113,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
     t0 = time.perf_counter()
     pairs = garment.seams.astype(np.int64)
     gap_max = 0.0
+    g_sewn = 0.0  # the gravity scale sewing ended with
     if len(pairs):
         welded = np.zeros(len(pairs), dtype=np.bool_)
         gaps = np.zeros(len(pairs))
@@ -122,7 +127,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
         solver.recover = 1e9  # recovery are for the drape (a new solver is made after welding)
         solver.sewing = (pairs, welded, o.sew_tau, o.sew_vmax)
         for it in range(budget):
-            g = o.sew_gravity * min(1.0, (it + 1) * dt / o.gravity_ramp)  # let the seams catch first
+            g = g_sewn = o.sew_gravity * min(1.0, (it + 1) * dt / o.gravity_ramp)  # let the seams catch first
             solver.step(state, gravity_scale=g, damping_scale=o.sew_damping, friction_scale=o.sew_friction)
             hold_welds(state.x, state.v, model.mass, pairs, welded)
             if observer is not None and it % observe == 0:
@@ -173,32 +178,40 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
         solver.strain_guard = o.strain_guard
     budget = int(np.ceil(o.drape_budget / dt))
     min_it = int(np.ceil(o.drape_min / dt))
-    window = max(1, int(np.ceil(o.settle_time / dt)))
+    # the settle test runs every 1/SETTLE_CHECKS of a window, on the two windows just ended
+    sub = max(1, int(np.ceil(o.settle_time / dt / SETTLE_CHECKS)))
+    window = sub * SETTLE_CHECKS
     check_every = max(1, int(0.005 / dt))
     observe = max(1, int(o.observe_every / dt))
     tri1 = _triangles(model) if observer is not None else None
-    ramp_it = max(1, int(o.gravity_ramp / dt))
     settled = False
-    snap, calm, drift = state.x.copy(), 0, np.inf
-    guard_steps, guard_share = 0, 0.0  # steps of the window in which the strain guard acted
+    snaps = deque([state.x.copy()], maxlen=2 * SETTLE_CHECKS + 1)  # positions every `sub` steps
+    guards = deque(maxlen=SETTLE_CHECKS)  # steps of each sub-window in which the strain guard acted
+    drift, guard_steps, guard_share = np.inf, 0, 0.0
     for it in range(budget):
-        solver.step(state, gravity_scale=min(1.0, (it + 1) / ramp_it), damping_scale=o.drape_damping)
+        # gravity goes on growing from where sewing left it (no second ramp from zero)
+        solver.step(state, gravity_scale=min(1.0, g_sewn + (it + 1) * dt / o.gravity_ramp),
+                    damping_scale=o.drape_damping)
         guard_steps += solver.guarded > 0
         if observer is not None and it % observe == 0:
             observer("draping", state.x, tri1, None)
         if it % check_every == 0:
             _check_finite(state, "draping")
             progress("draping", min(1.0, it / max(min_it, 1)), f"drift {drift * 100:.2f} cm/s")
-        if (it + 1) % window == 0:
-            # settled = the shape stopped moving: RMS displacement over the window, as a speed
-            # (contacts keep a jitter of a few mm/s in the velocities that goes nowhere)
-            drift = float(np.sqrt(np.mean(np.sum((state.x - snap) ** 2, axis=1)))) / (window * dt)
-            snap[:] = state.x
-            guard_share, guard_steps = guard_steps / window, 0
-            calm = calm + 1 if drift < o.settle_speed else 0
-            if calm >= 2 and it >= min_it:
-                settled = True
-                break
+        if (it + 1) % sub == 0:
+            snaps.append(state.x.copy())
+            guards.append(guard_steps)
+            guard_steps = 0
+            if len(snaps) == snaps.maxlen:
+                # settled = the shape stopped moving: RMS displacement over each of the last two
+                # windows, as a speed (contacts keep a jitter of a few mm/s in the velocities that
+                # goes nowhere)
+                older = _rms_move(snaps[SETTLE_CHECKS], snaps[0]) / (window * dt)
+                drift = _rms_move(snaps[-1], snaps[SETTLE_CHECKS]) / (window * dt)
+                guard_share = sum(guards) / window
+                if max(older, drift) < o.settle_speed and it >= min_it:
+                    settled = True
+                    break
     iters["draping"] = solver.iterations
     timing["draping"] = time.perf_counter() - t0
     strain = solver.max_strain(state)
@@ -229,6 +242,10 @@ def _edge(g: Garment) -> float:
 def _triangles(m: ClothModel) -> np.ndarray:
     q = m.quads
     return np.concatenate([m.tris, q[:, [0, 1, 2]], q[:, [0, 2, 3]]]).astype(np.int32)
+
+
+def _rms_move(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))))
 
 
 def _check_finite(state: ClothState, stage: str) -> None:
