@@ -43,8 +43,8 @@ class WalkOptions:
     # on a walking skirt within ~0.25 s (see engine.cloth.kernels.DIR_MIN_OBJECT_SPEED; measured
     # at 0.3 m/s: strain 5 % -> 30 % in 1000 steps, where eq. 5 holds 5.2-5.6 % for 3000).
     velocity_mode: str | None = None
-    # Gauss-Seidel passes of the strain limit per call while walking (the drape uses 12: a
-    # waistband settling on the hips needs them). Measured on the dress, 1.5 s of walking:
+    # Gauss-Seidel passes of the strain limit per call while walking (as the drape). Measured on
+    # the dress, 1.5 s of walking:
     # 12 passes 517 ms a frame, strain max 7.6 %, penetration max 1.5 mm; 6 passes 418 ms,
     # 7.7 %, 0.6 mm; 3 passes 388 ms, 8.4 %.
     vm_passes: int = 6
