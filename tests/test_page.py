@@ -10,6 +10,7 @@ import subprocess
 import sys
 import time
 import urllib.request
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,7 @@ import pytest
 
 CHROMIUM = "/usr/bin/chromium"
 ROOT = Path(__file__).resolve().parents[1]
+SHOTS = ROOT / "out" / "page"  # screenshots, to look at
 
 pytestmark = pytest.mark.skipif(not Path(CHROMIUM).exists(), reason="Debian's chromium is not installed "
                                 "(scripts/setup.sh installs it)")
@@ -54,17 +56,12 @@ def server(tmp_path):
     log.close()
 
 
-def _colour_share(img: np.ndarray, rgb, tol=40) -> float:
-    d = np.abs(img[..., :3].astype(int) - np.array(rgb)).max(axis=-1)
-    return float((d < tol).mean())
-
-
-def test_page_dresses_the_default_avatar(server, tmp_path):
-    from PIL import Image
+@contextmanager
+def _page(server: str):
+    """The page in chromium, its catalogue loaded; yields (page, the page's script errors)."""
     from playwright.sync_api import sync_playwright
 
-    shots = ROOT / "out" / "page"
-    shots.mkdir(parents=True, exist_ok=True)
+    SHOTS.mkdir(parents=True, exist_ok=True)
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=CHROMIUM, args=["--enable-unsafe-swiftshader"])
         page = browser.new_page(viewport={"width": 1280, "height": 800})
@@ -72,16 +69,34 @@ def test_page_dresses_the_default_avatar(server, tmp_path):
         page.on("pageerror", lambda e: errors.append(str(e)))
         page.goto(server + "/")
         page.wait_for_selector("#garment option[value=dress]", state="attached")
+        yield page, errors
+        browser.close()
+
+
+def _try_on(page) -> None:
+    """Press Try on; wait for success or for a failure the page shows (the test then fails with
+    its message at once instead of waiting out the timeout)."""
+    page.click("#tryon")
+    page.wait_for_function("(t => t.startsWith('Done') || t.startsWith('The try-on '))"
+                           "(document.getElementById('status').textContent)", timeout=240_000)
+    text = page.inner_text("#status")
+    assert text.startswith("Done"), text
+
+
+def _colour_share(img: np.ndarray, rgb, tol=40) -> float:
+    d = np.abs(img[..., :3].astype(int) - np.array(rgb)).max(axis=-1)
+    return float((d < tol).mean())
+
+
+def test_page_dresses_the_default_avatar(server, tmp_path):
+    from PIL import Image
+
+    shots = SHOTS
+    with _page(server) as (page, errors):
         page.select_option("#garment", "dress")
         page.select_option("#quality", "3")
         page.screenshot(path=str(shots / "1-form.png"))
-        page.click("#tryon")
-        # ends on success or on a failure the page shows (the test then fails with its message
-        # at once instead of waiting out the timeout)
-        page.wait_for_function("(t => t.startsWith('Done') || t.startsWith('The try-on '))"
-                               "(document.getElementById('status').textContent)", timeout=240_000)
-        text = page.inner_text("#status")
-        assert text.startswith("Done"), text
+        _try_on(page)
         frame = page.frame_locator("#viewer")
         frame.locator("canvas").first.wait_for(timeout=60_000)
         time.sleep(6)  # the recording plays (the last frame is the draped dress)
@@ -94,7 +109,6 @@ def test_page_dresses_the_default_avatar(server, tmp_path):
             link.click()
         glb = d.value.path()
         assert open(glb, "rb").read(4) == b"glTF"
-        browser.close()
     img = np.asarray(Image.open(tmp_path / "viewer.png").convert("RGB"))
     # both meshes are on screen: skin-coloured body pixels and blue garment pixels (viser shades
     # them, so a generous tolerance around the base colours)
@@ -107,8 +121,6 @@ def test_page_dresses_the_default_avatar(server, tmp_path):
 def test_page_plays_an_uploaded_animation(server, tmp_path):
     """A user uploads a moving body (a zip of OBJ frames) through the page, at its frame rate,
     with Motion "walking": the result is the animation, played as uploaded."""
-    from playwright.sync_api import sync_playwright
-
     from engine.body.default import default_body
     from engine.body.motion import WalkParams, walk_track
     from tests.samples import write_anim_zip
@@ -116,32 +128,19 @@ def test_page_plays_an_uploaded_animation(server, tmp_path):
     body = default_body("male")
     tr = walk_track(body, WalkParams(), fps=15)
     zp = write_anim_zip(tmp_path / "my walk.zip", [tr.vertices(i) for i in range(8)], body.faces)
-    shots = ROOT / "out" / "page"
-    shots.mkdir(parents=True, exist_ok=True)
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=CHROMIUM, args=["--enable-unsafe-swiftshader"])
-        page = browser.new_page(viewport={"width": 1280, "height": 800})
-        errors = []
-        page.on("pageerror", lambda e: errors.append(str(e)))
-        page.goto(server + "/")
-        page.wait_for_selector("#garment option[value=skirt]", state="attached")
+    with _page(server) as (page, errors):
         page.check("input[name=bodykind][value=scan]")
         page.set_input_files("#scan", str(zp))
         page.fill("#fps", "15")
         page.select_option("#garment", "skirt")
         page.select_option("#motion", "walk")
         page.select_option("#quality", "3")
-        page.click("#tryon")
-        page.wait_for_function("(t => t.startsWith('Done') || t.startsWith('The try-on '))"
-                               "(document.getElementById('status').textContent)", timeout=240_000)
-        text = page.inner_text("#status")
-        assert text.startswith("Done"), text
+        _try_on(page)
         page.wait_for_selector("#results img[alt='strip.png']")
-        page.screenshot(path=str(shots / "4-animation.png"))
+        page.screenshot(path=str(SHOTS / "4-animation.png"))
         link = page.locator("#download-anim-glb")
         assert link.count() == 1
         with page.expect_download() as d:
             link.click()
         assert open(d.value.path(), "rb").read(4) == b"glTF"
-        browser.close()
     assert errors == [], errors
