@@ -17,7 +17,11 @@ that frame before asking.
 Asking the maps is the costliest part of a step, and most cloth points are far from the body or
 move with it: each point keeps its last answer (in the root's frame) and asks again only when it
 may be stale (_query_cached) -- measured on the walking dress (4374 vertices, 9097 points), 13 %
-of the points a step; 1.9 instead of 2.6 ms a step.
+of the points a step; 1.9 instead of 2.6 ms a step. (Measured again 2026-12-01, checks every 4th
+step: 37 % of the points a check, 0.71 ms; most of them because an answer is at most MAX_AGE
+old -- a clear point beside a limb, outside every map, has no distance to test. Trusting the
+distance test alone for clear points asked 2214 instead of 3366 a check but let a swinging leg
+reach points unseen: penetration max 3.1 -> 13.5 mm.)
 
 Map reuse (DESIGN: a periodic walk renders one cycle): maps are kept per distinct track frame
 (the ramp, then one cycle), rendered on first use; `stats` counts renders and reuses. Kept maps
