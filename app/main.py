@@ -22,6 +22,7 @@ from fastapi import Cookie, Depends, FastAPI, File, Form, Header, HTTPException,
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
+from starlette.concurrency import run_in_threadpool
 from pydantic import BaseModel, Field
 
 from app.db import ACTIVE, DB, new_id
@@ -146,8 +147,8 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
         ext = Path(file.filename or "").suffix.lower()
         if ext not in BODY_EXT:
             raise HTTPException(400, f"body file type '{ext or 'none'}' is not supported: give one of {' '.join(BODY_EXT)}")
-        if not (math.isfinite(fps) and 1.0 <= fps <= 240.0):
-            raise HTTPException(422, f"fps {fps:g}: give the animation's frame rate, 1 .. 240")
+        if not (math.isfinite(fps) and 5.0 <= fps <= 240.0):
+            raise HTTPException(422, f"fps {fps:g}: give the animation's frame rate, 5 .. 240")
         bid = new_id()
         dest = s.data_dir / "uploads" / f"body-{bid}{ext}"  # our name, never the client's
         await save_upload(file, dest)
@@ -157,14 +158,14 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
             if ext == ".zip" or (ext in (".glb", ".gltf") and has_animation(dest)):
                 from engine.body.animation import load_animation
 
-                track = load_animation(dest, fps)
+                track = await run_in_threadpool(load_animation, dest, fps)  # seconds for long ones: off the event loop
                 b, kind = track.body, "animation"
                 n = int(track.frames.shape[0])
                 info = {"frames": n, "fps": fps, "seconds": round((n - 1) / fps, 3), "notes": list(track.notes)}
             else:
                 from engine.body.load import load_body_file
 
-                b, kind, info = load_body_file(dest), "upload", {"notes": None}
+                b, kind, info = await run_in_threadpool(load_body_file, dest), "upload", {"notes": None}
         except TryonError as e:
             dest.unlink(missing_ok=True)
             raise HTTPException(400, str(e).replace(dest.name, file.filename or dest.name)) from None
