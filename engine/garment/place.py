@@ -3,7 +3,9 @@ body they were not made for).
 
 Torso and hip panels are wrapped onto an elliptic cylinder around the body: at every height the
 ellipse is the body's cross-section (torso and legs, never the arms) grown by a clearance and,
-where the garment is wider than that, grown until the panel's width spans half of it. A panel's
+where the garment is wider than that, grown until the panel's width spans half of it; the
+ellipses change slowly with height (wrap_torso), and the straps above the armholes stand clear
+of the shoulders. A panel's
 horizontal coordinate is laid out as arc length from the front (or back) centre line, so front and
 back panels meet at the sides and the side seams start almost closed. Sleeves are wrapped onto tubes
 around the arm's smoothed, elbow-bent centre line with their underarm seam underneath
@@ -23,6 +25,8 @@ from engine.pattern.spec import PanelHint
 CLEARANCE = 0.02  # m between the body and a freshly placed panel
 ROW = 0.01  # m: wrap_torso finds the body's ellipse every ROW of a panel's height
 SLOPE = 0.3  # see wrap_torso
+RISE_SLOPE = 0.075  # see wrap_torso: how fast the straps' move out eases in below clamp_y
+PROFILE_X = np.arange(-1.0, 1.0001, 0.01)  # m: the x bins of BodySections.surface_z
 
 
 class BodySections:
@@ -56,10 +60,33 @@ class BodySections:
         for c in range(5):  # fill gaps (e.g. a hole in a scan) by interpolation
             ell[:, c] = np.interp(self.ys, self.ys[ok], ell[ok, c])
         self.ell = ell
+        self._v, self._f = body.vertices, body.faces  # the whole body, for surface_z
+        self._profiles: dict = {}
 
     def at(self, y: np.ndarray, grown: bool = False) -> np.ndarray:
         """(len(y), 4) ellipses at heights y (grown: (len(y), 5), + the growth factor of cover)."""
         return np.stack([np.interp(y, self.ys, self.ell[:, c]) for c in range(5 if grown else 4)], axis=1)
+
+    def surface_z(self, x: np.ndarray, y: np.ndarray, side: float) -> np.ndarray:
+        """The whole body's (arms included) frontmost z (side +1) or backmost z (side -1) within
+        1 cm of each (x, y), from its cut at the nearest 1 cm; NaN where the body is not."""
+        rows = np.round(np.asarray(y) / 0.01).astype(int)
+        out = np.full(len(rows), np.nan)
+        for r in np.unique(rows):
+            prof = self._profiles.get((r, side))
+            if prof is None:
+                pieces = slice_stack(self._v, self._f, np.array([r * 0.01]))[0]
+                prof = np.full(len(PROFILE_X), -np.inf)
+                if pieces:
+                    p = np.concatenate([q.points for q in pieces])
+                    b = np.clip(np.round((p[:, 0] - PROFILE_X[0]) / 0.01).astype(int), 0, len(PROFILE_X) - 1)
+                    np.maximum.at(prof, b, side * p[:, 1])
+                    prof = np.maximum(prof, np.maximum(np.roll(prof, 1), np.roll(prof, -1)))  # within 1 cm
+                self._profiles[(r, side)] = prof
+            sel = rows == r
+            b = np.clip(np.round((x[sel] - PROFILE_X[0]) / 0.01).astype(int), 0, len(PROFILE_X) - 1)
+            out[sel] = np.where(np.isfinite(prof[b]), side * prof[b], np.nan)
+        return out
 
 
 def _covering_ellipse(p: np.ndarray) -> list[float]:
@@ -128,7 +155,8 @@ def wrap_torso(uv: np.ndarray, hint: PanelHint, sections: BodySections, top_y: f
         ell[j] = cx, cz, a * k, b * k
     # the ellipses' extremes (left, right, front, back) move out until they change by at most
     # `slope` a metre of height; the ellipse through them is used
-    ext = np.stack([ell[:, 0] + ell[:, 2], -(ell[:, 0] - ell[:, 2]), ell[:, 1] + ell[:, 3], -(ell[:, 1] - ell[:, 3])], axis=1)
+    cx, cz, a, b = ell.T
+    ext = np.stack([cx + a, a - cx, cz + b, b - cz], axis=1)  # x max, -x min, z max, -z min
     step = slope * ROW
     for j in range(len(rows) - 2, -1, -1):  # downward from the top ...
         ext[j] = np.maximum(ext[j], ext[j + 1] - step)
@@ -148,6 +176,23 @@ def wrap_torso(uv: np.ndarray, hint: PanelHint, sections: BodySections, top_y: f
             out[sel, 0] += wj[sel] * (cx + a * sn)
             out[sel, 2] += wj[sel] * (cz + sign * b * cs)
     out[:, 1] = y
+    if clamp_y is not None and np.any(y > clamp_y):
+        # above clamp_y (the straps, the upper back) the wrap keeps the cut at clamp_y, which
+        # the shoulders and shoulder blades outgrow (measured: the dress's back straps started
+        # up to 5 cm inside the shoulders). Each 1 cm row there moves out (+-z) as a whole until
+        # its points stand CLEARANCE clear of the whole body's surface, the moves eased in over
+        # the rows below at RISE_SLOPE (measured on the dress: eased at 0.3, 46 % strain at the
+        # side seams under the arms; at 0.075, 31 %)
+        up = y > clamp_y
+        zs = sections.surface_z(out[up, 0], y[up], sign)
+        need = np.where(np.isfinite(zs), sign * (zs - out[up, 2]) + CLEARANCE, 0.0)
+        move = np.zeros(len(rows))
+        np.maximum.at(move, np.clip(np.round(f[up]).astype(int), 0, len(rows) - 1), need)
+        for j in range(len(rows) - 2, -1, -1):
+            move[j] = max(move[j], move[j + 1] - RISE_SLOPE * ROW)
+        for j in range(1, len(rows)):
+            move[j] = max(move[j], move[j - 1] - RISE_SLOPE * ROW)
+        out[:, 2] += sign * ((1.0 - w) * move[j0] + w * move[j0 + 1])
     return out
 
 

@@ -491,7 +491,9 @@ def make_garment(name: str, body: Body, size: str = "M"):
         raise InputError(f"unknown garment '{name}'; the catalogue has: {', '.join(CATALOGUE)}")
     fit = _fit(body, size)
     made = CATALOGUE[name][0](fit)
-    sections = BodySections(body, cover=name in ("shirt", "trousers"))
+    # covering ellipses for every garment (the box's inscribed one started the male hips inside
+    # the skirt and dress)
+    sections = BodySections(body, cover=True)
     scale = made.spec.scale
     outlines = {n: geo.outline(p, scale) for n, p in made.spec.pattern.panels.items()}
     special = {n: _sleeve_placer(body, plan, outlines[n]) for n, plan in made.sleeve_axes.items()}
