@@ -159,18 +159,18 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
                 from engine.body.animation import load_animation
 
                 track = await run_in_threadpool(load_animation, dest, fps)  # seconds for long ones: off the event loop
-                b, kind = track.body, "animation"
+                b, kind, notes = track.body, "animation", list(track.notes)
                 n = int(track.frames.shape[0])
-                info = {"frames": n, "fps": fps, "seconds": round((n - 1) / fps, 3), "notes": list(track.notes)}
+                extra = {"frames": n, "fps": fps, "seconds": round((n - 1) / fps, 3)}
             else:
                 from engine.body.load import load_body_file
 
-                b, kind, info = await run_in_threadpool(load_body_file, dest), "upload", {"notes": None}
+                b = await run_in_threadpool(load_body_file, dest)
+                kind, notes, extra = "upload", b.notes, {}
         except TryonError as e:
             dest.unlink(missing_ok=True)
             raise HTTPException(400, str(e).replace(dest.name, file.filename or dest.name)) from None
-        info = {"height_m": round(b.height, 4), "vertices": int(len(b.vertices)), **info,
-                "notes": info["notes"] if info["notes"] is not None else b.notes}
+        info = {"height_m": round(b.height, 4), "vertices": int(len(b.vertices)), **extra, "notes": notes}
         name = Path(file.filename or "scan").stem[:80]
         db.run("INSERT INTO bodies VALUES (?,?,?,?,?,?,?)", bid, who, kind, str(dest), name, time.time(),
                json.dumps(info))

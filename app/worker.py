@@ -127,7 +127,9 @@ def _simulate(req, body, spec, place, name, fabric, walking, out, progress, view
 
         # an uploaded animation moves as uploaded; a scan walks with the default skeleton fitted to it
         walker = body if track is not None else walking_body(body)
-        wo = WalkOptions(seconds=req.get("seconds", 4.0), **({"fps": track.fps} if track is not None else {}))
+        wo = WalkOptions(seconds=req.get("seconds", 4.0))
+        if track is not None:
+            wo.fps = track.fps  # the upload's own rate
         w = walk_cloth(walker, res, wo, texel=0.005, tol=res.model.params.tolerance, progress=progress,
                        observer=view, track=track)
         report = walk_report(report, w.report)

@@ -118,8 +118,7 @@ def _half_perimeter(a: float, b: float) -> float:
 
 
 def wrap_torso(uv: np.ndarray, hint: PanelHint, sections: BodySections, top_y: float,
-               outline: np.ndarray, widen_to: float | None = None, clamp_y: float | None = None,
-               slope: float | None = None) -> np.ndarray:
+               outline: np.ndarray, widen_to: float | None = None, clamp_y: float | None = None) -> np.ndarray:
     """(n, 2) panel points (metres; v = 0 at the panel's top, u = 0 on its centre line) ->
     (n, 3) world points on the front (hint.side == 'front') or back of the body.
     outline: (M, 2) the panel's outline, for its width at each height; clamp_y: above this
@@ -130,15 +129,14 @@ def wrap_torso(uv: np.ndarray, hint: PanelHint, sections: BodySections, top_y: f
     fast with height a vertical line of the panel is stretched: the body's own profile (under
     the bust, at the seat) strained the placed dress by up to 70 % and its springs kicked the
     hem up at metres per second. So the ellipses' extremes (front, back and sides) only move
-    out until they change by at most `slope` (default SLOPE) per metre of height, up and down:
+    out until they change by at most SLOPE per metre of height, up and down:
     the cloth stands off where the body narrows, as a dress falls from the bust, and a
-    vertical line is stretched by about sqrt(1 + slope^2) - 1 at most (measured on the dress:
+    vertical line is stretched by about sqrt(1 + SLOPE^2) - 1 at most (measured on the dress:
     structural springs max +70 % -> +27 %, p99 +28 % -> +14 %; slope 0.15 halves that again
     but starts the side seams up to 9 cm apart)."""
     u, v = uv[:, 0], uv[:, 1]
     y = top_y + v
     sign = 1.0 if hint.side == "front" else -1.0
-    slope = SLOPE if slope is None else slope
     rows = np.arange(int(np.floor(v.min() / ROW)), int(np.floor(v.max() / ROW)) + 2)  # rows[-2] * ROW <= v.max()
     ell = np.zeros((len(rows), 4))  # cx, cz, a, b of each row
     for j, r in enumerate(rows):
@@ -154,14 +152,9 @@ def wrap_torso(uv: np.ndarray, hint: PanelHint, sections: BodySections, top_y: f
         k = max(kc ** -0.5, width / half) if widen_to is None else max(kc ** -0.5, widen_to / half)
         ell[j] = cx, cz, a * k, b * k
     # the ellipses' extremes (left, right, front, back) move out until they change by at most
-    # `slope` a metre of height; the ellipse through them is used
+    # SLOPE a metre of height; the ellipse through them is used
     cx, cz, a, b = ell.T
-    ext = np.stack([cx + a, a - cx, cz + b, b - cz], axis=1)  # x max, -x min, z max, -z min
-    step = slope * ROW
-    for j in range(len(rows) - 2, -1, -1):  # downward from the top ...
-        ext[j] = np.maximum(ext[j], ext[j + 1] - step)
-    for j in range(1, len(rows)):  # ... and upward from the hem
-        ext[j] = np.maximum(ext[j], ext[j - 1] - step)
+    ext = _limit_slope(np.stack([cx + a, a - cx, cz + b, b - cz], axis=1), SLOPE * ROW)  # x max, -x min, ...
     ell = np.stack([(ext[:, 0] - ext[:, 1]) / 2, (ext[:, 2] - ext[:, 3]) / 2,
                     (ext[:, 0] + ext[:, 1]) / 2, (ext[:, 2] + ext[:, 3]) / 2], axis=1)
     f = v / ROW - rows[0]
@@ -169,8 +162,8 @@ def wrap_torso(uv: np.ndarray, hint: PanelHint, sections: BodySections, top_y: f
     w = np.clip(f - j0, 0.0, 1.0)
     out = np.zeros((len(uv), 3))
     for j in np.unique(j0):
+        sel = j0 == j
         for jj, wj in ((j, 1.0 - w), (j + 1, w)):
-            sel = j0 == j
             cx, cz, a, b = ell[jj]
             sn, cs = _ellipse_point(a, b, u[sel])
             out[sel, 0] += wj[sel] * (cx + a * sn)
@@ -188,12 +181,19 @@ def wrap_torso(uv: np.ndarray, hint: PanelHint, sections: BodySections, top_y: f
         need = np.where(np.isfinite(zs), sign * (zs - out[up, 2]) + CLEARANCE, 0.0)
         move = np.zeros(len(rows))
         np.maximum.at(move, np.clip(np.round(f[up]).astype(int), 0, len(rows) - 1), need)
-        for j in range(len(rows) - 2, -1, -1):
-            move[j] = max(move[j], move[j + 1] - RISE_SLOPE * ROW)
-        for j in range(1, len(rows)):
-            move[j] = max(move[j], move[j - 1] - RISE_SLOPE * ROW)
+        move = _limit_slope(move, RISE_SLOPE * ROW)
         out[:, 2] += sign * ((1.0 - w) * move[j0] + w * move[j0 + 1])
     return out
+
+
+def _limit_slope(a: np.ndarray, step: float) -> np.ndarray:
+    """a (rows, ...) raised, never lowered, until neighbouring rows differ by at most step."""
+    a = a.copy()
+    for j in range(len(a) - 2, -1, -1):  # downward from the top ...
+        a[j] = np.maximum(a[j], a[j + 1] - step)
+    for j in range(1, len(a)):  # ... and upward from the bottom
+        a[j] = np.maximum(a[j], a[j - 1] - step)
+    return a
 
 
 def _width_at(outline: np.ndarray, v: float) -> float:
