@@ -201,6 +201,8 @@ def drape_cmd(
                    f"penetration max {r['penetration_mm']['max']:.1f} mm p99 {r['penetration_mm']['p99']:.1f} mm; "
                    f"strain max {100 * r['strain']['max']:.1f} % (threshold {100 * r['strain']['threshold']:.0f} %); "
                    f"settled: {r['settled']}")
+        for w in r["warnings"]:
+            typer.echo(f"warning: {w}", err=True)
 
     _run(go)
 

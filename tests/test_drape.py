@@ -2,7 +2,7 @@
 catalogue on the default bodies. The fast test runs a coarse cloth; the quality tests (slow)
 run the default resolution and check the issue's criteria: every seam welded, penetration
 measured exactly against the body mesh max <= 3 mm and p99 <= 1 mm, strain max <= threshold +
-1 %, settled."""
+1 %, settled, and the garment still hanging where it was placed."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from engine.cli import app
 from tests.samples import SAMPLE_BODY, SAMPLE_SKIRT
 
 REPORT_KEYS = {"cloth_vertices", "iterations", "ms_per_iteration", "wall_seconds", "penetration_mm", "strain",
-               "seam_gap_mm", "settled", "left_out"}
+               "seam_gap_mm", "settled", "left_out", "shift_mm", "warnings"}
 
 
 def _check_quality(rep: dict) -> None:
@@ -27,6 +27,9 @@ def _check_quality(rep: dict) -> None:
     # welded: the sewn garment has fewer vertices than the flat panels, seams closed
     assert rep["cloth_vertices"] < rep["cloth_vertices_unsewn"]
     assert rep["seam_gap_mm"]["max"] <= 10.0
+    # hanging where it was placed: not slid down the body, not bunched up (a dress blown into a
+    # heap on one shoulder passed every check above: its hem had risen 60 cm)
+    assert rep["shift_mm"]["top"] >= -100.0 and rep["shift_mm"]["hem"] <= 150.0, rep["shift_mm"]
 
 
 def test_drape_command_writes_everything(tmp_path):
@@ -49,6 +52,27 @@ def test_drape_command_writes_everything(tmp_path):
     g = trimesh.load(out / "garment.obj", process=False)
     assert 0.95 < g.vertices[:, 1].max() < 1.15
     assert g.vertices[:, 1].min() > 0.3
+
+
+def test_a_garment_that_slid_down_or_bunched_up_is_flagged():
+    """The report says when a drape did not end hanging where it was placed."""
+    from engine.scene.tryon import hang_shift, hang_warnings
+
+    rng = np.random.default_rng(0)
+    placed = rng.uniform([-0.2, 0.5, -0.15], [0.2, 1.4, 0.15], (500, 3))  # a dress, shoulders to knees
+    placed[:2, 1] = 0.5, 1.4
+
+    def shifted(lo, hi):
+        y = placed[:, 1]
+        return np.column_stack([placed[:, 0], lo + (y - y.min()) / np.ptp(y) * (hi - lo), placed[:, 2]])
+
+    hanging = hang_shift(placed, shifted(0.46, 1.43))  # the hem fell 4 cm, the top rose 3 cm
+    assert hanging["top"] == pytest.approx(0.03) and hanging["hem"] == pytest.approx(-0.04)
+    assert hang_warnings(hanging) == []
+    heap = hang_warnings(hang_shift(placed, shifted(1.1, 1.45)))  # a heap on the shoulders
+    assert len(heap) == 1 and "rose 60 cm" in heap[0] and "bunched up" in heap[0]
+    slid = hang_warnings(hang_shift(placed, shifted(0.05, 1.2)))  # slid down 20 cm
+    assert len(slid) == 1 and "slid 20 cm down" in slid[0]
 
 
 @pytest.mark.slow

@@ -92,18 +92,14 @@ def _noop(stage: str, fraction: float, message: str) -> None:
 
 
 def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOptions | None = None,
-                  progress: Progress = _noop, sew_collider: Collider | None = None,
-                  observer: Observer | None = None) -> DrapeResult:
-    """sew_collider: the body as seen while sewing, when it differs from the drape's (a top
-    without sleeves is sewn against the torso alone -- its shoulder seams close through the
-    arm's root, as a person's arm goes through the armhole -- and draped against the whole body,
-    which pushes anything left inside the shoulder out)."""
+                  progress: Progress = _noop, observer: Observer | None = None) -> DrapeResult:
+    """Sew the placed panels, then drape them, against the same collider (module doc)."""
     o = options or DrapeOptions()
     fabric = get_fabric(o.fabric)
     model = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris,
                         garment.seams, fabric, _edge(garment), o.params)
     state = ClothState(garment.positions.copy(), np.zeros_like(garment.positions))
-    solver = ClothSolver(model, collider if sew_collider is None else sew_collider, dt=o.dt, force_dt=o.force_dt)
+    solver = ClothSolver(model, collider, dt=o.dt, force_dt=o.force_dt)
     dt = solver.dt
     iters = {"sewing": 0, "draping": 0}
     timing = {"sewing": 0.0, "draping": 0.0}
