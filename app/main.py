@@ -51,7 +51,8 @@ class TryOnIn(BaseModel):
     body_id: str | None = Field(None, description="a body you created; or give `body`")
     body: str | None = Field(None, description="a default body spec, e.g. default:female,height=1.7")
     garment: str = Field(..., description="a catalogue name (GET /api/garments) or the id of your pattern")
-    size: str | None = Field(None, description="catalogue size XS..XXL (default M); not for patterns")
+    size: str | None = Field(None, description="catalogue size XS..XXL, or auto: the smallest that covers "
+                                                "the body's girths (default M); not for patterns")
     fabric: str = "cotton"
     motion: Literal["none", "walk"] = "none"
     seconds: float = Field(4.0, description="walking time (motion=walk)")
@@ -212,10 +213,10 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
     @app.get("/api/garments")
     def garments(who: str = Depends(owner)):
         from engine.cloth.fabrics import FABRICS
-        from engine.pattern.catalogue import CATALOGUE, SIZES
+        from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES
 
         return {"catalogue": [{"name": n, "description": d} for n, (_, d) in CATALOGUE.items()],
-                "sizes": list(SIZES), "fabrics": list(FABRICS),
+                "sizes": [*SIZES, AUTO], "fabrics": list(FABRICS),
                 "uploaded": [garment_out(r) for r in db.all("SELECT * FROM garments WHERE owner=? ORDER BY created", who)]}
 
     def garment_out(row: dict) -> dict:
@@ -269,7 +270,7 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
     @app.post("/api/tryons", status_code=202)
     def create_tryon(req: TryOnIn, who: str = Depends(owner)):
         from engine.cloth.fabrics import FABRICS
-        from engine.pattern.catalogue import CATALOGUE, SIZES
+        from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES
 
         if (req.body_id is None) == (req.body is None):
             raise HTTPException(422, "give either body_id (a body you created) or body (e.g. default:female)")
@@ -288,8 +289,8 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
             body = {"spec": req.body}
         if req.garment in CATALOGUE:
             garment = {"name": req.garment}
-            if req.size is not None and req.size.upper() not in SIZES:
-                raise HTTPException(422, f"size '{req.size}': choose one of {', '.join(SIZES)}")
+            if req.size is not None and req.size.upper() not in SIZES and req.size.lower() != AUTO:
+                raise HTTPException(422, f"size '{req.size}': choose one of {', '.join(SIZES)} or {AUTO}")
         else:
             g = db.one("SELECT * FROM garments WHERE id=? AND owner=?", req.garment, who)
             if g is None:
@@ -304,7 +305,8 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
             raise HTTPException(422, "resolution_cm: use 0.75 .. 4 cm")
         if not (0.1 <= req.seconds <= 20.0) or not math.isfinite(req.seconds):
             raise HTTPException(422, "seconds: walk 0.1 .. 20 s")
-        request = {"body": body, "garment": garment, "size": req.size.upper() if req.size else None,
+        size = None if req.size is None else (AUTO if req.size.lower() == AUTO else req.size.upper())
+        request = {"body": body, "garment": garment, "size": size,
                    "fabric": req.fabric, "motion": req.motion, "seconds": req.seconds,
                    "resolution_cm": req.resolution_cm}
         jid = db.enqueue(who, request, s.queue_max)

@@ -144,7 +144,7 @@ def drape_cmd(
     body: str = typer.Option(..., "--body", help=BODY_HELP),
     garment: str = typer.Option(..., "--garment", help="A catalogue garment (see `tryon garments`) or a "
                                 "GarmentCode pattern file (.json)."),
-    size: Optional[str] = typer.Option(None, "--size", help="Catalogue size: XS, S, M, L, XL, XXL (default M), on the women's or men's chart: a default body's own, any other body's by its waist-to-hip ratio."),
+    size: Optional[str] = typer.Option(None, "--size", help="Catalogue size: XS, S, M, L, XL, XXL (default M), on the women's or men's chart: a default body's own, any other body's by its waist-to-hip ratio; or auto: the smallest size whose chart girths cover the body's."),
     fabric: str = typer.Option("cotton", "--fabric", help="cotton, denim, silk or jersey."),
     out: Path = typer.Option(Path("out/drape"), "--out", help="Output directory."),
     resolution: float = typer.Option(1.5, "--resolution", help="Cloth edge length in cm."),
@@ -212,7 +212,7 @@ def walk_cmd(
     body: str = typer.Option(..., "--body", help=BODY_HELP),
     garment: str = typer.Option(..., "--garment", help="A catalogue garment (see `tryon garments`) or a "
                                 "GarmentCode pattern file (.json)."),
-    size: Optional[str] = typer.Option(None, "--size", help="Catalogue size: XS, S, M, L, XL, XXL (default M), on the women's or men's chart: a default body's own, any other body's by its waist-to-hip ratio."),
+    size: Optional[str] = typer.Option(None, "--size", help="Catalogue size: XS, S, M, L, XL, XXL (default M), on the women's or men's chart: a default body's own, any other body's by its waist-to-hip ratio; or auto: the smallest size whose chart girths cover the body's."),
     fabric: str = typer.Option("cotton", "--fabric", help="cotton, denim, silk or jersey."),
     seconds: float = typer.Option(4.0, "--seconds", help="How long to walk (s), after dressing."),
     fps: float = typer.Option(30.0, "--fps", help="Body frames (and output frames) per second; an uploaded .zip of OBJ frames plays at this rate, an animated .glb is sampled at it."),
@@ -317,7 +317,8 @@ def garments_cmd():
         width = max(len(n) for n in CATALOGUE)
         for name, (_, description) in CATALOGUE.items():
             typer.echo(f"{name:<{width}}  {description}")
-        typer.echo(f"sizes: {', '.join(SIZES)} (--size; women's or men's chart from the body)")
+        typer.echo(f"sizes: {', '.join(SIZES)}, auto (--size; women's or men's chart from the body; auto: "
+                   "the smallest size that covers the body's girths)")
 
     _run(go)
 

@@ -80,6 +80,7 @@ def test_upload_body_and_pattern(idle):
     assert r.status_code == 400 and "JSON" in r.json()["error"]
     g = idle.get("/api/garments", headers=h).json()
     assert "dress" in [x["name"] for x in g["catalogue"]] and "M" in g["sizes"] and "silk" in g["fabrics"]
+    assert g["sizes"][-1] == "auto"  # the smallest size that covers the body's girths
     assert len(g["uploaded"]) == 1
 
 
@@ -115,6 +116,14 @@ def test_tryon_validation(idle):
         r = idle.post("/api/tryons", json=body, headers=h)
         assert r.status_code in (404, 422), (body, r.status_code)
         assert words in r.json()["error"], (body, r.json())
+
+
+def test_tryon_takes_auto_size(idle):
+    """size auto (any case) is queued as such; the worker picks the size from the body."""
+    h = token(idle)
+    r = idle.post("/api/tryons", json={"body": "default:female", "garment": "dress", "size": "Auto"}, headers=h)
+    assert r.status_code == 202, r.json()
+    assert idle.get(f"/api/tryons/{r.json()['id']}", headers=h).json()["request"]["size"] == "auto"
 
 
 def test_queue_full_is_429(idle):

@@ -8,6 +8,7 @@ import pytest
 
 from engine.body import resolve_body
 from engine.pattern import geometry as geo
+from engine.errors import InputError
 from engine.pattern.catalogue import BUST_SHIFT, CATALOGUE, SIZES, make_garment
 from engine.pattern.validate import check
 
@@ -85,6 +86,35 @@ def test_size_chart_follows_the_body_not_its_file_name(tmp_path):
     assert chart_of(resolve_body(str(SAMPLE_BODY))) == "women"  # the sample scan, a woman
     _, _, label = make_garment("skirt", Body(male.vertices, male.faces, name="body-1234"), "M")
     assert label == "skirt (M, men's chart)"
+
+
+def test_auto_size_is_the_smallest_that_covers_the_body():
+    """--size auto: the default bodies get M on their charts, the sample scan (hips 105 cm) L
+    on the women's; a body scaled to a 30 % larger girth is beyond XXL, a clear error; the
+    label says how the size was chosen."""
+    from engine.body import resolve_body
+    from engine.body.measure import measure
+    from engine.body.types import Body
+    from engine.pattern.catalogue import FIT_GIRTHS, WOMEN, recommend_size
+    from tests.samples import SAMPLE_BODY
+
+    for name in ("default:female", "default:male"):
+        body = resolve_body(name)
+        assert {recommend_size(g, body) for g in CATALOGUE} == {"M"}, name
+    scan = resolve_body(str(SAMPLE_BODY))
+    m = measure(scan)
+    for g in CATALOGUE:
+        size = recommend_size(g, scan, m)
+        assert size == "L", g
+        # minimal: M (92/74/100) leaves the scan's hips (105 cm) beyond half a step (3 cm)
+        assert 100 * m.hips > WOMEN["M"][2] + 3 and "hips" in FIT_GIRTHS[g]
+    _, _, label = make_garment("dress", scan, "auto")
+    assert label == "dress (L, women's chart, chosen from the body's girths)"
+    big = Body(scan.vertices * [1.3, 1.0, 1.3], scan.faces, name="big")
+    with pytest.raises(InputError, match="larger than the largest size, XXL"):
+        recommend_size("skirt", big)
+    with pytest.raises(InputError, match="choose one of XS, S, M, L, XL, XXL or auto"):
+        make_garment("skirt", scan, "XXXL")
 
 
 @pytest.mark.parametrize("garment, share", [("dress", 0.0), ("skirt", 0.0), ("sleeveless-shirt", 0.0),

@@ -174,11 +174,48 @@ def chart_of(body: Body, m=None) -> str:
     return "men" if np.isfinite(ratio) and ratio >= MEN_RATIO else "women"
 
 
+# the body girths each garment is cut to fit (the others it does not reach, or hangs free of)
+FIT_GIRTHS = {"skirt": ("waist", "hips"), "trousers": ("waist", "hips"), "sleeveless-shirt": ("bust", "hips"),
+              "dress": ("bust", "waist", "hips"), "shirt": ("bust", "hips")}
+AUTO = "auto"
+
+
+def recommend_size(name: str, body: Body, m=None) -> str:
+    """The smallest size whose chart girths cover the body's, for the girths this garment is cut
+    to fit (FIT_GIRTHS): a chart's centre value covers bodies up to half a step above it (the
+    next size takes over there), so a body between two sizes gets the larger one. Measured:
+    default:female (85/67/98 cm) and default:male (101/83/102 cm) get M, the sample scan
+    (98/80/105 cm) L -- its M dress and trousers cannot be sewn round its hips."""
+    from engine.body.measure import measure
+
+    if name not in FIT_GIRTHS:
+        raise InputError(f"unknown garment '{name}'; the catalogue has: {', '.join(CATALOGUE)}")
+    m = m if m is not None else measure(body)
+    chart = MEN if chart_of(body, m) == "men" else WOMEN
+    keys = ("bust", "waist", "hips")
+    have = {k: 100 * getattr(m, k) for k in FIT_GIRTHS[name]}
+    bad = [k for k, v in have.items() if not np.isfinite(v)]
+    if bad:
+        raise InputError(f"the body's {', '.join(bad)} could not be measured, so no size can be chosen "
+                         "for it: give one (--size M)")
+
+    def covers(i: int, g: str) -> float:  # the largest girth g size i fits: half a step past its own
+        col, nxt = keys.index(g), min(i + 1, len(SIZES) - 1)  # (XXL: half the step from XL)
+        return chart[SIZES[i]][col] + 0.5 * (chart[SIZES[nxt]][col] - chart[SIZES[nxt - 1]][col])
+
+    for i, size in enumerate(SIZES):
+        if all(v <= covers(i, g) for g, v in have.items()):
+            return size
+    big = ", ".join(f"{g} {v:.0f} cm" for g, v in have.items())
+    top = ", ".join(f"{g} {chart[SIZES[-1]][keys.index(g)]} cm" for g in have)
+    raise InputError(f"the body ({big}) is larger than the largest size, {SIZES[-1]} ({top})")
+
+
 def _fit(body: Body, size: str) -> Fit:
     from engine.body.measure import measure
 
     if size not in SIZES:
-        raise InputError(f"size '{size}': choose one of {', '.join(SIZES)}")
+        raise InputError(f"size '{size}': choose one of {', '.join(SIZES)} or {AUTO} (from the body's girths)")
     m = measure(body)
     chart = MEN if chart_of(body, m) == "men" else WOMEN
     bust, waist, hips = chart[size]
@@ -489,6 +526,9 @@ def make_garment(name: str, body: Body, size: str = "M"):
 
     if name not in CATALOGUE:
         raise InputError(f"unknown garment '{name}'; the catalogue has: {', '.join(CATALOGUE)}")
+    chosen = size == AUTO
+    if chosen:
+        size = recommend_size(name, body)
     fit = _fit(body, size)
     made = CATALOGUE[name][0](fit)
     # covering ellipses for every garment (the box's inscribed one started the male hips inside
@@ -506,7 +546,8 @@ def make_garment(name: str, body: Body, size: str = "M"):
         hint = made.hints[pname]
         return wrap_torso(uv, hint, sections, made.tops[pname] / 100.0, outlines[pname], clamp_y=made.clamp_y)
 
-    return made.spec, place, f"{name} ({size}, {'men' if fit.men else 'women'}'s chart)"
+    how = ", chosen from the body's girths" if chosen else ""
+    return made.spec, place, f"{name} ({size}, {'men' if fit.men else 'women'}'s chart{how})"
 
 
 def _row_widths(outline: np.ndarray, vs: np.ndarray, u_min: float = -np.inf) -> np.ndarray:
