@@ -639,6 +639,21 @@ def test_strain_guard_never_pulls_a_contact_into_the_body():
     assert x[0, 1] < 0.0
 
 
+def test_strain_guard_shortens_a_spring_a_little_at_a_time():
+    """The guard moves positions by at most max_move a spring a pass, so a spring stretched 3 mm
+    past its limit (cloth torn over a body part) is brought back over several steps, not in one
+    jump that compresses its neighbours; Provot's comparison mode (no limit) projects at once."""
+    def run(max_move, passes):
+        x = np.array([[0.0, 0.0, 0.0], [0.103, 0.0, 0.0]])
+        args = (np.array([[0, 1]], np.int32), np.array([0.1]), np.array([True]), 0.0, np.ones(2), passes,
+                np.zeros(1, np.int32), True, np.zeros(2, np.bool_), np.zeros((2, 3)))
+        K.provot_positions(x, *args, max_move) if max_move is not None else K.provot_positions(x, *args)
+        return x[1, 0] - x[0, 0]
+    assert run(0.0003, 1) == pytest.approx(0.1027)
+    assert run(0.0003, 4) == pytest.approx(0.1018)
+    assert run(None, 1) == pytest.approx(0.1)  # the default: no limit
+
+
 @pytest.mark.parametrize("mode", ["average", "directional"])
 @pytest.mark.parametrize("rounds", [1, 2, 4])
 def test_contact_rounds_match_the_kernels_in_turn(mode, rounds):

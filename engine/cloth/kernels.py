@@ -328,9 +328,10 @@ def outward_only(px, py, pz, i, contact, contact_n):
 
 
 @njit(fastmath=True, cache=True, inline="always")
-def _project_one(x, a, b, lmax, inv_mass, keep_out, contact, contact_n):
-    """Move a and b toward each other (mass-weighted) back to length lmax. keep_out: an end
-    touching the body is not moved into it (outward_only), so the spring may stay a little long."""
+def _project_one(x, a, b, lmax, inv_mass, keep_out, contact, contact_n, max_move):
+    """Move a and b toward each other (mass-weighted) back to length lmax, shortening the spring
+    by at most max_move. keep_out: an end touching the body is not moved into it
+    (outward_only), so the spring may stay a little long."""
     dx = x[b, 0] - x[a, 0]
     dy = x[b, 1] - x[a, 1]
     dz = x[b, 2] - x[a, 2]
@@ -338,7 +339,7 @@ def _project_one(x, a, b, lmax, inv_mass, keep_out, contact, contact_n):
     if length <= lmax or length < 1e-12:
         return False
     wa, wb = inv_mass[a], inv_mass[b]
-    corr = (length - lmax) / (length * (wa + wb))
+    corr = min(length - lmax, max_move) / (length * (wa + wb))
     ax, ay, az = wa * corr * dx, wa * corr * dy, wa * corr * dz
     bx, by, bz = -wb * corr * dx, -wb * corr * dy, -wb * corr * dz
     if keep_out:
@@ -354,7 +355,8 @@ def _project_one(x, a, b, lmax, inv_mass, keep_out, contact, contact_n):
 
 
 @serial_kernel
-def provot_positions(x, springs, rest, active, threshold, inv_mass, passes, work, keep_out, contact, contact_n):
+def provot_positions(x, springs, rest, active, threshold, inv_mass, passes, work, keep_out, contact, contact_n,
+                     max_move=np.inf):
     """Provot (1995) position modification: move the ends of springs longer than
     (1 + threshold) x rest toward each other (mass-weighted) back to that length. One sweep
     finds them (into `work`), further passes revisit only those. Used as the comparison mode
@@ -364,7 +366,7 @@ def provot_positions(x, springs, rest, active, threshold, inv_mass, passes, work
     n_act = 0
     for s in range(springs.shape[0]):
         if active[s] and _project_one(x, springs[s, 0], springs[s, 1], (1.0 + threshold) * rest[s], inv_mass,
-                                          keep_out, contact, contact_n):
+                                          keep_out, contact, contact_n, max_move):
             work[n_act] = s
             n_act += 1
     for _ in range(passes - 1):
@@ -372,7 +374,7 @@ def provot_positions(x, springs, rest, active, threshold, inv_mass, passes, work
         for k in range(n_act):
             s = work[k]
             if _project_one(x, springs[s, 0], springs[s, 1], (1.0 + threshold) * rest[s], inv_mass,
-                                          keep_out, contact, contact_n):
+                                          keep_out, contact, contact_n, max_move):
                 changed += 1
         if changed == 0:
             break

@@ -118,12 +118,13 @@ class ClothSolver:
         K.integrate_positions(state.x, state.v, dt)
         if self.mode == K.VM_PROVOT:
             K.provot_positions(state.x, m.springs, m.rest, self.active, m.fabric.strain_threshold,
-                               m.inv_mass, p.vm_passes, self.vm_work, False, self.contact, self.contact_n)
+                               m.inv_mass, p.vm_passes, self.vm_work, False, self.contact, self.contact_n, np.inf)
         elif self.strain_guard is not None:
             # what the velocity modification could not hold (the body pushing a band outward)
             self.guarded = K.provot_positions(state.x, m.springs, m.rest, self.active,
                                               m.fabric.strain_threshold + self.strain_guard, m.inv_mass,
-                                              p.vm_passes, self.vm_work, True, self.contact, self.contact_n)
+                                              p.vm_passes, self.vm_work, True, self.contact, self.contact_n,
+                                              p.guard_step)
         t3 = time.perf_counter()
         self.timing["cloth"] += (t1 - t0) + (t3 - t2)
         self.timing["collision"] += t2 - t1
