@@ -82,7 +82,8 @@ def run_job(db: DB, job: dict, data_dir: Path) -> None:
 
 def _run(req: dict, out: Path, progress, live=None) -> dict:
     from engine.body import resolve_body
-    from engine.scene.garments import resolve_garment
+    from engine.errors import SimulationError
+    from engine.scene.garments import add_size_hint, resolve_garment
 
     progress("body", 0.0, "loading the body")
     b = req["body"]
@@ -109,6 +110,10 @@ def _run(req: dict, out: Path, progress, live=None) -> dict:
         if live is not None:
             live(view.port)
         return _simulate(req, body, spec, place, name, fabric, walking, out, progress, view, track)
+    except SimulationError as e:
+        if "name" in g:
+            add_size_hint(e, g["name"], body, req.get("size"))
+        raise
     finally:
         view.close()
 

@@ -167,7 +167,7 @@ def drape_cmd(
         from engine.cloth.model import ClothParams
         from engine.errors import SimulationError
         from engine.scene.drape import DrapeOptions
-        from engine.scene.garments import resolve_garment
+        from engine.scene.garments import add_size_hint, resolve_garment
         from engine.scene.tryon import run_tryon, write_outputs
 
         b = _body(body, up, front)
@@ -182,6 +182,7 @@ def drape_cmd(
                                         collision=collision, options=opts, place=place, source=name,
                                         progress=update)
             except SimulationError as e:
+                add_size_hint(e, garment, b, size)
                 if getattr(e, "positions", None) is not None:
                     from PIL import Image
 
@@ -238,8 +239,9 @@ def walk_cmd(
 
     def go():
         from engine.body.motion import WalkParams
+        from engine.errors import SimulationError
         from engine.scene.drape import DrapeOptions
-        from engine.scene.garments import resolve_garment
+        from engine.scene.garments import add_size_hint, resolve_garment
         from engine.scene.tryon import run_tryon
         from engine.scene.walk import WalkOptions, walk_cloth, walk_report, walking_body, write_walk_outputs
 
@@ -265,9 +267,13 @@ def walk_cmd(
         spec, place, name = resolve_garment(garment, b, size)
         prog, update = _progress_printer()
         with prog:
-            res, report = run_tryon(b, spec, fabric=fabric, h=resolution / 100.0, texel=texel / 1000.0,
-                                    collision=collision, options=DrapeOptions(fabric=fabric), place=place,
-                                    source=name, progress=update)
+            try:
+                res, report = run_tryon(b, spec, fabric=fabric, h=resolution / 100.0, texel=texel / 1000.0,
+                                        collision=collision, options=DrapeOptions(fabric=fabric), place=place,
+                                        source=name, progress=update)
+            except SimulationError as e:
+                add_size_hint(e, garment, b, size)
+                raise
             # (a scan is dressed as loaded and walks fitted: see engine.scene.walk.walking_body)
             w = walk_cloth(walker, res, wo, texel=texel / 1000.0, tol=res.model.params.tolerance,
                            progress=update, track=track)

@@ -202,6 +202,7 @@ def test_failed_tryon_reports_the_reason(tmp_path):
                                         "resolution_cm": 3}, headers=h)
         j = wait(c, h, r.json()["id"])
         assert j["status"] == "failed" and "too small" in j["error"], j
+        assert "--size auto picks" in j["error"], j  # a heavier body than default:female's M
         assert "files" not in j
 
 

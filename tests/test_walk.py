@@ -336,6 +336,7 @@ def test_walk_refuses_a_garment_far_too_small(tmp_path):
                   "--resolution", "3", "--seconds", "1")
     assert r.exit_code == 2, (r.exit_code, r.output)
     assert "too small" in r.stderr and "larger size" in r.stderr
+    assert "--size auto picks L" in r.stderr  # the size that covers this body's girths
     assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
 
 

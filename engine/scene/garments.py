@@ -26,3 +26,20 @@ def resolve_garment(arg: str, body: Body, size: str | None = "M"):
         return make_garment(arg, body, size)
     names = ", ".join(CATALOGUE)
     raise InputError(f"garment '{arg}' is neither a pattern file nor a catalogue garment ({names})")
+
+
+def add_size_hint(err: Exception, arg: str, body: Body, size: str | None) -> None:
+    """A catalogue garment that came out too small for the body (it could not be sewn, or ended
+    stretched): add to the error's message the size --size auto picks for this body, when that
+    is larger than the one asked for."""
+    from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES, recommend_size
+
+    size = size or "M"
+    if arg not in CATALOGUE or size == AUTO or "too small" not in str(err):
+        return
+    try:
+        best = recommend_size(arg, body)
+    except InputError:
+        return
+    if SIZES.index(best) > SIZES.index(size):
+        err.args = (f"{err} (for this body's girths --size auto picks {best})",) + tuple(err.args[1:])
