@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from engine.body import resolve_body
-from engine.pattern import geometry as geo
 from engine.errors import InputError
+from engine.pattern import geometry as geo
 from engine.pattern.catalogue import BUST_SHIFT, CATALOGUE, SIZES, make_garment
 from engine.pattern.validate import check
 
@@ -92,7 +92,6 @@ def test_auto_size_is_the_smallest_that_covers_the_body():
     """--size auto: the default bodies get M on their charts, the sample scan (hips 105 cm) L
     on the women's; a body scaled to a 30 % larger girth is beyond XXL, a clear error; the
     label says how the size was chosen."""
-    from engine.body import resolve_body
     from engine.body.measure import measure
     from engine.body.types import Body
     from engine.pattern.catalogue import FIT_GIRTHS, WOMEN, recommend_size

@@ -150,6 +150,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
                                   f"open seams: {names}. The garment may be too small for this body "
                                   "(try a larger size) or the panels start too far apart")
             err.positions, err.triangles = state.x.copy(), _triangles(model)  # for a picture
+            err.too_small = True  # (engine.scene.garments.add_size_hint)
             raise err
         # merge the sewn vertices and continue on the welded model
         vmap = merge_map(model.n, pairs)
@@ -216,6 +217,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
                               f"{100 * strain:.0f} % where {fabric.name} allows {100 * fabric.strain_threshold:.0f} %; "
                               "try a larger size")
         err.positions, err.triangles = state.x.copy(), _triangles(model)
+        err.too_small = True
         raise err
     for k in cloth_t:
         cloth_t[k] += solver.timing[k]

@@ -29,13 +29,13 @@ def resolve_garment(arg: str, body: Body, size: str | None = "M"):
 
 
 def add_size_hint(err: Exception, arg: str, body: Body, size: str | None) -> None:
-    """A catalogue garment that came out too small for the body (it could not be sewn, or ended
-    stretched): add to the error's message the size --size auto picks for this body, when that
-    is larger than the one asked for."""
+    """A catalogue garment that came out too small for the body (the drape marks such an error
+    `too_small`: it could not be sewn, or ended stretched): add to the error's message the size
+    --size auto picks for this body, when that is larger than the one asked for."""
     from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES, recommend_size
 
     size = size or "M"
-    if arg not in CATALOGUE or size == AUTO or "too small" not in str(err):
+    if arg not in CATALOGUE or size == AUTO or not getattr(err, "too_small", False):
         return
     try:
         best = recommend_size(arg, body)
