@@ -87,6 +87,21 @@ def test_sample_skirt_quality(tmp_path):
 
 
 @pytest.mark.slow
+def test_sleeved_shirt_on_the_sample_scan():
+    """The scan has no skeleton; its sleeves are placed along a fitted one (make_garment) and the
+    shirt drapes to the same quality as on the default bodies (measured: 14.6k iterations,
+    strain 5.9 %, penetration 0.4 mm)."""
+    from engine.body import resolve_body
+    from engine.scene.garments import resolve_garment
+    from engine.scene.tryon import run_tryon
+
+    b = resolve_body(str(SAMPLE_BODY))
+    spec, place, name = resolve_garment("shirt", b, "auto")
+    _, rep = run_tryon(b, spec, place=place, source=name)
+    _check_quality(rep)
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("body", ["default:female", "default:male"])
 @pytest.mark.parametrize("garment", ["skirt", "trousers", "sleeveless-shirt", "dress", "shirt"])
 def test_catalogue_quality(body, garment):

@@ -157,7 +157,8 @@ class Fit:
     shoulder_w: float
     armpit_h: float
     # the body's arm joints when it has a rig: side ('left' = +x) -> (3, 3) world points (m) of
-    # the upper arm, elbow and wrist joints; None for scans
+    # the upper arm, elbow and wrist joints; None for scans (make_garment fits a skeleton to a
+    # scan for the garments that need them)
     arms: dict[str, np.ndarray] | None = None
     men: bool = False
 
@@ -427,8 +428,8 @@ def shirt(f: Fit) -> Made:
     """Shirt with long sleeves: the sleeveless bodice with its shoulders out to the shoulder
     points, plus one-piece sleeves whose caps are sewn into the armholes."""
     if f.arms is None:
-        raise InputError("sleeved garments need the body's arm axes, which come from a skeleton: this body "
-                         "has none (a scan); use the default body, or the sleeveless-shirt")
+        raise InputError("sleeved garments need the body's arm axes, which come from a skeleton, and none "
+                         "could be fitted to this body; use the default body, or the sleeveless-shirt")
     length = f.shoulder_h + 4 - f.hip_h + 6
     shoulder = 1.0  # the shoulder seam ends 1 cm past the shoulder point, on the arm
     panels, st, hints, fi, bi, top = _torso_garment(f, length, 10, None, 8, 1.0, 9.0, shoulder)
@@ -511,6 +512,8 @@ def trousers(f: Fit) -> Made:
     return Made(_spec(panels, st, hints), tops, hints, {}, None, legs)
 
 
+NEEDS_ARMS = {"shirt"}  # garments placed along the arms' joints (see make_garment)
+
 CATALOGUE = {
     "skirt": (skirt, "A-line skirt, 2 panels, waist to knee"),
     "sleeveless-shirt": (sleeveless_shirt, "sleeveless shirt, 2 panels, shoulders to hips"),
@@ -530,13 +533,22 @@ def make_garment(name: str, body: Body, size: str = "M"):
     if chosen:
         size = recommend_size(name, body)
     fit = _fit(body, size)
+    arm_body = body
+    if name in NEEDS_ARMS and fit.arms is None:
+        # a scan has no skeleton: its arm axes and arm vertices come from the default skeleton
+        # fitted to it (engine.body.fit, as for walking); the drape still collides with the
+        # scan as loaded
+        from engine.body.fit import fit_rig
+
+        arm_body = fit_rig(body, "male" if fit.men else "female")
+        fit.arms = _arm_joints(arm_body)
     made = CATALOGUE[name][0](fit)
     # covering ellipses for every garment (the box's inscribed one started the male hips inside
     # the skirt and dress)
     sections = BodySections(body, cover=True)
     scale = made.spec.scale
     outlines = {n: geo.outline(p, scale) for n, p in made.spec.pattern.panels.items()}
-    special = {n: _sleeve_placer(body, plan, outlines[n]) for n, plan in made.sleeve_axes.items()}
+    special = {n: _sleeve_placer(arm_body, plan, outlines[n]) for n, plan in made.sleeve_axes.items()}
     if made.legs:
         special.update(_trouser_placers(body, made, sections, outlines))
 
