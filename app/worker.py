@@ -82,8 +82,6 @@ def run_job(db: DB, job: dict, data_dir: Path) -> None:
 
 def _run(req: dict, out: Path, progress, live=None) -> dict:
     from engine.body import resolve_body
-    from engine.errors import SimulationError
-    from engine.scene.garments import add_size_hint, resolve_garment
 
     progress("body", 0.0, "loading the body")
     b = req["body"]
@@ -96,11 +94,6 @@ def _run(req: dict, out: Path, progress, live=None) -> dict:
     else:
         body = resolve_body(b["spec"] if "spec" in b else b["file"])
     g = req["garment"]
-    if "name" in g:
-        spec, place, name = resolve_garment(g["name"], body, req.get("size") or "M")
-    else:
-        spec, place, name = resolve_garment(g["file"], body, None)
-        name = g.get("label", name)
     fabric = req.get("fabric", "cotton")
     walking = req.get("motion", "none") == "walk"
     from app.viewer import LiveView
@@ -109,22 +102,29 @@ def _run(req: dict, out: Path, progress, live=None) -> dict:
     try:
         if live is not None:
             live(view.port)
-        return _simulate(req, body, spec, place, name, fabric, walking, out, progress, view, track)
-    except SimulationError as e:
-        if "name" in g:
-            add_size_hint(e, g["name"], body, req.get("size"))
-        raise
+        return _simulate(req, body, g, fabric, walking, out, progress, view, track)
     finally:
         view.close()
 
 
-def _simulate(req, body, spec, place, name, fabric, walking, out, progress, view, track=None) -> dict:
+def _simulate(req, body, g, fabric, walking, out, progress, view, track=None) -> dict:
     from engine.scene.drape import DrapeOptions
+    from engine.scene.garments import dress_in_size
     from engine.scene.tryon import run_tryon, write_outputs
 
-    res, report = run_tryon(body, spec, fabric=fabric, h=req.get("resolution_cm", 1.5) / 100.0,
-                            options=DrapeOptions(fabric=fabric), place=place, source=name, progress=progress,
-                            observer=view)
+    def dress(spec, place, name):
+        return run_tryon(body, spec, fabric=fabric, h=req.get("resolution_cm", 1.5) / 100.0,
+                         options=DrapeOptions(fabric=fabric), place=place,
+                         source=name if "name" in g else g.get("label", name), progress=progress,
+                         observer=view)
+
+    def note(text):
+        progress("sewing", 0.0, text)
+
+    if "name" in g:
+        res, report = dress_in_size(g["name"], body, req.get("size") or "M", dress, note=note)
+    else:
+        res, report = dress_in_size(g["file"], body, None, dress)
     out.mkdir(parents=True, exist_ok=True)
     write_outputs(out, body, res, report, size=500)
     if walking:

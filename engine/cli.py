@@ -125,6 +125,10 @@ def render_cmd(
     _run(go)
 
 
+def _note(text: str) -> None:
+    typer.echo(f"note: {text}", err=True)
+
+
 def _progress_printer():
     """A one-line progress display on stderr (rich), returned with its context manager."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
@@ -144,7 +148,7 @@ def drape_cmd(
     body: str = typer.Option(..., "--body", help=BODY_HELP),
     garment: str = typer.Option(..., "--garment", help="A catalogue garment (see `tryon garments`) or a "
                                 "GarmentCode pattern file (.json)."),
-    size: Optional[str] = typer.Option(None, "--size", help="Catalogue size: XS, S, M, L, XL, XXL (default M), on the women's or men's chart: a default body's own, any other body's by its waist-to-hip ratio; or auto: the smallest size whose chart girths cover the body's."),
+    size: Optional[str] = typer.Option(None, "--size", help="Catalogue size: XS, S, M, L, XL, XXL (default M), on the women's or men's chart: a default body's own, any other body's by its waist-to-hip ratio; or auto: the smallest size whose chart girths cover the body's, and if that drapes too small (refused, or tight: stretched past the fabric's limit + 1 %), the next larger, up to two more."),
     fabric: str = typer.Option("cotton", "--fabric", help="cotton, denim, silk or jersey."),
     out: Path = typer.Option(Path("out/drape"), "--out", help="Output directory."),
     resolution: float = typer.Option(1.5, "--resolution", help="Cloth edge length in cm."),
@@ -167,22 +171,23 @@ def drape_cmd(
         from engine.cloth.model import ClothParams
         from engine.errors import SimulationError
         from engine.scene.drape import DrapeOptions
-        from engine.scene.garments import add_size_hint, resolve_garment
+        from engine.scene.garments import dress_in_size
         from engine.scene.tryon import run_tryon, write_outputs
 
         b = _body(body, up, front)
-        spec, place, name = resolve_garment(garment, b, size)
         params = replace(ClothParams(), velocity_mode=velocity_mode)
         opts = DrapeOptions(fabric=fabric, dt=None if dt is None else dt / 1000.0, force_dt=force_dt,
                             params=params)
         prog, update = _progress_printer()
+
+        def dress(spec, place, name):
+            return run_tryon(b, spec, fabric=fabric, h=resolution / 100.0, texel=texel / 1000.0,
+                             collision=collision, options=opts, place=place, source=name, progress=update)
+
         with prog:
             try:
-                res, report = run_tryon(b, spec, fabric=fabric, h=resolution / 100.0, texel=texel / 1000.0,
-                                        collision=collision, options=opts, place=place, source=name,
-                                        progress=update)
+                res, report = dress_in_size(garment, b, size, dress, note=_note)
             except SimulationError as e:
-                add_size_hint(e, garment, b, size)
                 if getattr(e, "positions", None) is not None:
                     from PIL import Image
 
@@ -213,7 +218,7 @@ def walk_cmd(
     body: str = typer.Option(..., "--body", help=BODY_HELP),
     garment: str = typer.Option(..., "--garment", help="A catalogue garment (see `tryon garments`) or a "
                                 "GarmentCode pattern file (.json)."),
-    size: Optional[str] = typer.Option(None, "--size", help="Catalogue size: XS, S, M, L, XL, XXL (default M), on the women's or men's chart: a default body's own, any other body's by its waist-to-hip ratio; or auto: the smallest size whose chart girths cover the body's."),
+    size: Optional[str] = typer.Option(None, "--size", help="Catalogue size: XS, S, M, L, XL, XXL (default M), on the women's or men's chart: a default body's own, any other body's by its waist-to-hip ratio; or auto: the smallest size whose chart girths cover the body's, and if that drapes too small (refused, or tight: stretched past the fabric's limit + 1 %), the next larger, up to two more."),
     fabric: str = typer.Option("cotton", "--fabric", help="cotton, denim, silk or jersey."),
     seconds: float = typer.Option(4.0, "--seconds", help="How long to walk (s), after dressing."),
     fps: float = typer.Option(30.0, "--fps", help="Body frames (and output frames) per second; an uploaded .zip of OBJ frames plays at this rate, an animated .glb is sampled at it."),
@@ -239,9 +244,8 @@ def walk_cmd(
 
     def go():
         from engine.body.motion import WalkParams
-        from engine.errors import SimulationError
         from engine.scene.drape import DrapeOptions
-        from engine.scene.garments import add_size_hint, resolve_garment
+        from engine.scene.garments import dress_in_size
         from engine.scene.tryon import run_tryon
         from engine.scene.walk import WalkOptions, walk_cloth, walk_report, walking_body, write_walk_outputs
 
@@ -264,16 +268,15 @@ def walk_cmd(
         walker = b if track is not None else walking_body(b)
         if walker is not b:  # a scan: the default body's skeleton and weights were fitted to it
             typer.echo(f"note: {walker.notes[-1]}", err=True)
-        spec, place, name = resolve_garment(garment, b, size)
         prog, update = _progress_printer()
+
+        def dress(spec, place, name):
+            return run_tryon(b, spec, fabric=fabric, h=resolution / 100.0, texel=texel / 1000.0,
+                             collision=collision, options=DrapeOptions(fabric=fabric), place=place,
+                             source=name, progress=update)
+
         with prog:
-            try:
-                res, report = run_tryon(b, spec, fabric=fabric, h=resolution / 100.0, texel=texel / 1000.0,
-                                        collision=collision, options=DrapeOptions(fabric=fabric), place=place,
-                                        source=name, progress=update)
-            except SimulationError as e:
-                add_size_hint(e, garment, b, size)
-                raise
+            res, report = dress_in_size(garment, b, size, dress, note=_note)
             # (a scan is dressed as loaded and walks fitted: see engine.scene.walk.walking_body)
             w = walk_cloth(walker, res, wo, texel=texel / 1000.0, tol=res.model.params.tolerance,
                            progress=update, track=track)

@@ -154,3 +154,57 @@ def test_sleeves_go_on_a_scans_arms():
         assert sd[sel].max() < 0.05, f"{name} up to {100 * sd[sel].max():.0f} cm off the arm"
         reach = (sign * g.positions[sel, 0]).max()
         assert reach > 0.5, f"{name} reaches only {100 * reach:.0f} cm out"
+
+
+def test_auto_size_dresses_the_next_size_when_the_drape_refuses_one():
+    """--size auto: the girths' size is dressed first; a drape that refuses it as too small
+    (SimulationError marked too_small) makes the next larger size dressed, at most AUTO_TRIES
+    more; other failures are not retried; the report lists the refused sizes. The drape here is
+    a stand-in that refuses chosen sizes (a real refusal, the sample scan's L dress, takes a
+    minute: tests/test_drape.py's slow test)."""
+    from engine.errors import SimulationError
+    from engine.scene.garments import AUTO_TRIES, dress_in_size
+
+    body = resolve_body("default:female")  # auto picks M
+    asked = []
+
+    def drape_refusing(*refused, too_small=True, tight=()):
+        def dress(spec, place, name):
+            size = name.split("(")[1].split(",")[0]
+            asked.append(size)
+            if size in refused:
+                e = SimulationError(f"{size} stretched 22 %")
+                e.too_small = too_small
+                raise e
+            strain = 0.05 + 0.01 * (len(tight) - tight.index(size)) if size in tight else 0.058
+            return size, {"garment": name, "tight": size in tight, "strain": {"max": strain}}
+        return dress
+
+    notes = []
+    res, rep = dress_in_size("dress", body, "auto", drape_refusing("M"), note=notes.append)
+    assert asked == ["M", "L"] and res == "L"
+    assert rep["garment"] == "dress (L, women's chart, chosen by draping: M too small)"
+    assert rep["sizes_tried"] == [{"size": "M", "error": "M stretched 22 %"}]
+    assert len(notes) == 1 and "trying L" in notes[0]
+    asked.clear()
+    _, rep = dress_in_size("dress", body, "auto", drape_refusing())
+    assert asked == ["M"] and rep["sizes_tried"] == []
+    assert rep["garment"] == "dress (M, women's chart, chosen from the body's girths)"
+    asked.clear()
+    with pytest.raises(SimulationError, match=r"--size auto tried M, L, XL\)"):
+        dress_in_size("dress", body, "auto", drape_refusing("M", "L", "XL", "XXL"))
+    assert asked == list(SIZES[SIZES.index("M"):SIZES.index("M") + 1 + AUTO_TRIES])
+    asked.clear()
+    with pytest.raises(SimulationError, match="M stretched"):  # not a size problem: no retry
+        dress_in_size("dress", body, "auto", drape_refusing("M", too_small=False))
+    asked.clear()
+    with pytest.raises(SimulationError, match="auto picks M"):  # an explicit size is dressed once
+        dress_in_size("dress", body, "S", drape_refusing("S"))
+    assert asked == ["S"]
+    # a drape that ended tight (strain past the threshold + 1 %) is too small as well; when
+    # every size is, the least stretched result comes back, its warnings say it is tight
+    asked.clear()
+    res, rep = dress_in_size("dress", body, "auto", drape_refusing("XL", tight=("M", "L")))
+    assert asked == ["M", "L", "XL"] and res == "L" and rep["tight"]
+    assert [t["size"] for t in rep["sizes_tried"]] == ["M", "XL"]
+    assert rep["sizes_tried"][0]["error"] == "tight: stretched 7 %"

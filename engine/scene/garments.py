@@ -43,3 +43,60 @@ def add_size_hint(err: Exception, arg: str, body: Body, size: str | None) -> Non
         return
     if SIZES.index(best) > SIZES.index(size):
         err.args = (f"{err} (for this body's girths --size auto picks {best})",) + tuple(err.args[1:])
+
+
+AUTO_TRIES = 2  # --size auto: the recommended size and at most this many larger ones
+
+
+def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
+    """Resolve GARMENT and dress the body with `dress(spec, place, name) -> (result, report)`.
+    With --size auto on a catalogue garment, the size recommended from the body's girths comes
+    first; if it comes out too small -- its drape refused it (seams that cannot close, cloth
+    stretched past DrapeOptions.too_tight) or ended tight (report["tight"]) -- the next larger
+    size is dressed, up to AUTO_TRIES more (measured: the sample scan's fuller bust leaves its
+    L dress at 11-22 % strain, its XL dress at 5.9 %). The report's `sizes_tried` lists the
+    sizes found too small and why; `note(text)` is told before each retry. When every size
+    tried is too small, the least stretched tight result is returned (its warnings say so), or
+    the last refusal raised. Other sizes and pattern files are dressed once; a too-small error
+    then names the size auto would pick (add_size_hint)."""
+    from engine.errors import SimulationError
+    from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES, make_garment, recommend_size
+
+    if arg not in CATALOGUE or size != AUTO:
+        spec, place, name = resolve_garment(arg, body, size)
+        try:
+            return dress(spec, place, name)
+        except SimulationError as e:
+            add_size_hint(e, arg, body, size)
+            raise
+    first = SIZES.index(recommend_size(arg, body))
+    sizes = SIZES[first:first + 1 + AUTO_TRIES]
+    tried: list[dict] = []
+    tight = None  # the least stretched tight result so far: (result, report, size)
+    for k, s in enumerate(sizes):
+        spec, place, name = make_garment(arg, body, s)
+        how = "chosen from the body's girths" if not tried else \
+            f"chosen by draping: {', '.join(t['size'] for t in tried)} too small"
+        try:
+            res, report = dress(spec, place, name[:-1] + f", {how})")
+        except SimulationError as e:
+            if not getattr(e, "too_small", False):
+                raise
+            if k == len(sizes) - 1 and tight is None:
+                e.args = (f"{e} (--size auto tried {', '.join([t['size'] for t in tried] + [s])})",) \
+                    + tuple(e.args[1:])
+                raise
+            why = str(e)
+        else:
+            report["sizes_tried"] = list(tried)
+            if not report.get("tight"):
+                return res, report
+            why = f"tight: stretched {100 * report['strain']['max']:.0f} %"
+            if tight is None or report["strain"]["max"] < tight[1]["strain"]["max"]:
+                tight = (res, report, s)
+        tried.append({"size": s, "error": why})
+        if k < len(sizes) - 1 and note is not None:
+            note(f"size {s} came out too small ({why}); trying {sizes[k + 1]}")
+    res, report, s = tight
+    report["sizes_tried"] = [t for t in tried if t["size"] != s]
+    return res, report

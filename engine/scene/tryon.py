@@ -136,13 +136,33 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
         "settled": bool(res.settled),
         "collision_maps": map_info,
         "left_out": plan.left_out,
-        "warnings": garment.warnings + hang_warnings(shift),
+        "tight": bool(res.strain_max > fab.strain_threshold + TIGHT),
+        "warnings": garment.warnings + hang_warnings(shift) + fit_warnings(res.strain_max, fab, res.settled,
+                                                                           o.drape_budget),
     }
     return res, report
 
 
 TOP_DROP = 0.10  # m: a garment whose top ends this far below where it was placed slid down the body
 HEM_RISE = 0.15  # m: ... whose lowest point ends this far above its placed height bunched up
+
+
+TIGHT = 0.01  # a drape stretched past the fabric's threshold by more than this is reported tight
+# (issue 3's quality limit; the strain guard holds a garment that fits at threshold + 0.9 %)
+
+
+def fit_warnings(strain: float, fabric, settled: bool, budget: float) -> list[str]:
+    """Warnings about a drape that ended but does not fit well: stretched past the fabric's
+    limit by more than TIGHT (past DrapeOptions.too_tight it is refused instead), or not
+    settled within the budget (s of simulated time)."""
+    out = []
+    if strain > fabric.strain_threshold + TIGHT:
+        out.append(f"the garment is tight: stretched {100 * strain:.0f} % where {fabric.name} allows "
+                   f"{100 * fabric.strain_threshold:.0f} % (try a larger size)")
+    if not settled:
+        out.append(f"the drape did not settle within {budget:g} s of simulated time: the cloth may "
+                   "still be moving in the pictures")
+    return out
 
 
 def hang_shift(placed: np.ndarray, draped: np.ndarray) -> dict[str, float]:
