@@ -112,14 +112,16 @@ def _simulate(req, body, g, fabric, walking, out, progress, view, track=None) ->
     from engine.scene.garments import dress_in_size
     from engine.scene.tryon import run_tryon, write_outputs
 
+    retry = [""]  # while --size auto dresses a larger size, every progress message says why
+
     def dress(spec, place, name):
         return run_tryon(body, spec, fabric=fabric, h=req.get("resolution_cm", 1.5) / 100.0,
                          options=DrapeOptions(fabric=fabric), place=place,
-                         source=name if "name" in g else g.get("label", name), progress=progress,
-                         observer=view)
+                         source=name if "name" in g else g.get("label", name),
+                         progress=lambda stage, f, msg: progress(stage, f, retry[0] + msg), observer=view)
 
-    def note(text):
-        progress("sewing", 0.0, text)
+    def note(size, why, larger):
+        retry[0] = f"size {size} came out too small, trying {larger} -- "
 
     if "name" in g:
         res, report = dress_in_size(g["name"], body, req.get("size") or "M", dress, note=note)

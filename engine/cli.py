@@ -125,8 +125,8 @@ def render_cmd(
     _run(go)
 
 
-def _note(text: str) -> None:
-    typer.echo(f"note: {text}", err=True)
+def _size_note(size: str, why: str, larger: str) -> None:
+    typer.echo(f"note: size {size} came out too small ({why}); trying {larger}", err=True)
 
 
 def _progress_printer():
@@ -186,7 +186,7 @@ def drape_cmd(
 
         with prog:
             try:
-                res, report = dress_in_size(garment, b, size, dress, note=_note)
+                res, report = dress_in_size(garment, b, size, dress, note=_size_note)
             except SimulationError as e:
                 if getattr(e, "positions", None) is not None:
                     from PIL import Image
@@ -276,7 +276,7 @@ def walk_cmd(
                              source=name, progress=update)
 
         with prog:
-            res, report = dress_in_size(garment, b, size, dress, note=_note)
+            res, report = dress_in_size(garment, b, size, dress, note=_size_note)
             # (a scan is dressed as loaded and walks fitted: see engine.scene.walk.walking_body)
             w = walk_cloth(walker, res, wo, texel=texel / 1000.0, tol=res.model.params.tolerance,
                            progress=update, track=track)

@@ -55,7 +55,7 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
     stretched past DrapeOptions.too_tight) or ended tight (report["tight"]) -- the next larger
     size is dressed, up to AUTO_TRIES more (measured: the sample scan's fuller bust leaves its
     L dress at 11-22 % strain, its XL dress at 5.9 %). The report's `sizes_tried` lists the
-    sizes found too small and why; `note(text)` is told before each retry. When every size
+    sizes found too small and why; `note(size, why, next size)` is called before each retry. When every size
     tried is too small, the least stretched tight result is returned (its warnings say so), or
     the last refusal raised. Other sizes and pattern files are dressed once; a too-small error
     then names the size auto would pick (add_size_hint)."""
@@ -96,7 +96,7 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
                 tight = (res, report, s)
         tried.append({"size": s, "error": why})
         if k < len(sizes) - 1 and note is not None:
-            note(f"size {s} came out too small ({why}); trying {sizes[k + 1]}")
+            note(s, why, sizes[k + 1])
     res, report, s = tight
     report["sizes_tried"] = [t for t in tried if t["size"] != s]
     return res, report
