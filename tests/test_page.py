@@ -95,8 +95,10 @@ def test_page_dresses_the_default_avatar(server, tmp_path):
     with _page(server) as (page, errors):
         page.select_option("#garment", "dress")
         page.select_option("#quality", "3")
+        assert page.input_value("#size") == "auto"  # the page picks the shopper's size by default
         page.screenshot(path=str(shots / "1-form.png"))
         _try_on(page)
+        assert "dress (M, women's chart, chosen from the body's girths)" in page.inner_text("#status")
         frame = page.frame_locator("#viewer")
         frame.locator("canvas").first.wait_for(timeout=60_000)
         time.sleep(6)  # the recording plays (the last frame is the draped dress)
