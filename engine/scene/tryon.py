@@ -130,7 +130,7 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
         # guard_share says how much of the fit it held in the end (0: none of the last steps)
         "strain": {"max": res.strain_max, "threshold": fab.strain_threshold, "guard": res.strain_guard,
                    "guard_share": res.guard_share},
-        "seam_gap_mm": {"max": res.seam_gap_max * 1000},
+        "seam_gap_mm": {"max": res.seam_gap_max * 1000, "snapped": res.snapped},
         "shift_mm": {k: v * 1000 for k, v in shift.items()},
         "kinetic_energy_j": res.kinetic_energy,
         "settled": bool(res.settled),
