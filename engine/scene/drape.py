@@ -257,7 +257,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
     return DrapeResult(positions=state.x.copy(), triangles=_triangles(model), model=model, state=state,
                        iterations=iters, timing={**timing, **{f"{k}_total": v for k, v in cloth_t.items()}},
                        seam_gap_max=gap_max, settled=settled, kinetic_energy=solver.kinetic_energy(state),
-                       strain_max=solver.max_strain(state), dt=dt, strain_guard=solver.strain_guard,
+                       strain_max=strain, dt=dt, strain_guard=solver.strain_guard,
                        guard_share=guard_share, snapped=snapped)
 
 

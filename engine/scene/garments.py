@@ -57,8 +57,8 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
     L dress at 11-22 % strain, its XL dress at 5.9 %). The report's `sizes_tried` lists the
     sizes found too small and why; `note(size, why, next size)` is called before each retry.
     When every size tried is too small, the least stretched tight result is returned (its
-    warnings say so), or the last refusal raised. Other sizes and pattern files are dressed once; a too-small error
-    then names the size auto would pick (add_size_hint)."""
+    warnings say so), or the last refusal raised. Other sizes and pattern files are dressed
+    once; a too-small error then names the size auto would pick (add_size_hint)."""
     from engine.errors import SimulationError
     from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES, make_garment, recommend_size
 

@@ -145,8 +145,6 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
 
 TOP_DROP = 0.10  # m: a garment whose top ends this far below where it was placed slid down the body
 HEM_RISE = 0.15  # m: ... whose lowest point ends this far above its placed height bunched up
-
-
 TIGHT = 0.01  # a drape stretched past the fabric's threshold by more than this is reported tight
 # (issue 3's quality limit; the strain guard holds a garment that fits at threshold + 0.9 %)
 
