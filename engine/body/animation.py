@@ -46,7 +46,7 @@ def load_animation(path: str | Path, fps: float, up: str | None = None, front: s
             with open(p0, "w") as fh:
                 fh.write("".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in frames_raw[0].tolist()))
                 fh.write("".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces0.tolist()))
-            first = load_body_file(p0, up=up, front=front)
+            first = load_body_file(p0, up=up, front=front, fill_holes=False)
         names = [f"{path.name} frame {k}" for k in range(len(frames_raw))]
         return _track(path, first, list(frames_raw), names, fps, notes)
     if not zipfile.is_zipfile(path):
@@ -63,7 +63,7 @@ def load_animation(path: str | Path, fps: float, up: str | None = None, front: s
             p = Path(tmp) / f"{i:05d}.obj"  # our own names: never a path from the zip
             p.write_bytes(z.read(n))
             files.append(p)
-        first = load_body_file(files[0], up=up, front=front)
+        first = load_body_file(files[0], up=up, front=front, fill_holes=False)
         raw0, faces0 = _read(files[0])
         frames_raw = [raw0]
         for n, p in zip(names[1:], files[1:]):
