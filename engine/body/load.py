@@ -273,11 +273,12 @@ def _orient(v: np.ndarray, f: np.ndarray, notes: list[str]) -> np.ndarray:
 
 def _hole_loops(v: np.ndarray, f: np.ndarray) -> np.ndarray:
     """Lengths of the boundary loops (chains of edges used by one face), in v's units."""
-    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-    ue, cnt = np.unique(e, axis=0, return_counts=True)
-    b = ue[cnt == 1]
-    if len(b) == 0:
+    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1).astype(np.int64)
+    key, cnt = np.unique(e[:, 0] * len(v) + e[:, 1], return_counts=True)  # 1-D: fast on 2M faces
+    once = key[cnt == 1]
+    if len(once) == 0:
         return np.zeros(0)
+    b = np.stack([once // len(v), once % len(v)], axis=1)
     ncomp, label = connected_components(
         coo_matrix((np.ones(len(b), np.int8), (b[:, 0], b[:, 1])), shape=(len(v), len(v))), directed=False)
     length = np.linalg.norm(v[b[:, 0]] - v[b[:, 1]], axis=1)
