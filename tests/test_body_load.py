@@ -119,6 +119,24 @@ def test_pieces_tiny_bits_dropped_head_kept(tmp_path, source):
     assert any("2 hole(s) in the surface" in n for n in kept.notes)
 
 
+@pytest.mark.parametrize("rot,scale", [(np.eye(3), 1.0), (ZUP, 1000.0)])
+def test_floor_plate_is_dropped(tmp_path, source, rot, scale):
+    """A scan captured standing on a floor plate or turntable (a separate thin, wide piece under
+    the feet): the plate goes, the body keeps every face and its height (kept, the plate added
+    its 1 cm to every height and stood in the maps)."""
+    v, f = source
+    plate = trimesh.creation.box((0.8, 0.01, 0.8))
+    pv = np.asarray(plate.vertices) + [0.0, -0.006, 0.0]
+    vv = np.vstack([v, pv]) @ rot.T * scale
+    path = write(tmp_path / "on_a_plate.obj", vv, np.vstack([f, np.asarray(plate.faces) + len(v)]))
+    b = load_body_file(path)
+    assert len(b.faces) == len(f)
+    assert abs(b.height - 1.662) < 0.002
+    notes = " ".join(b.notes)
+    assert "dropped the floor plate under the feet (80 x 80 cm, 1.0 cm thick)" in notes
+    assert "separate pieces" not in notes
+
+
 def test_holes_reported(tmp_path, source):
     v, f = source
     path = write(tmp_path / "holes.obj", v, f[50:])  # remove a few faces -> a hole

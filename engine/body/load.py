@@ -4,7 +4,8 @@ DESIGN.md: metres, Y up, facing +Z, feet on y = 0, centred on x = z = 0 (boundin
 Units come from a plausible human height; the up axis from the shape (standing human: the long
 axis; the end with the flat soles is down); the front from the feet (toes point forward) and the
 face. Messy scans are repaired (duplicate vertices merged, degenerate faces and tiny floating
-bits dropped, holes closed) and every decision is written to Body.notes.
+bits dropped, holes closed, a floor plate under the feet dropped) and every decision is
+written to Body.notes.
 
 Holes: scanners leave the crown, the soles, armpits and the crotch open, and drop scattered
 triangles. A horizontal cut through a hole is not a closed loop, so measurements read nonsense
@@ -70,6 +71,7 @@ def load_body_file(path, up: str | None = None, front: str | None = None,
         front_ax = _detect_front(vertices, faces, up_ax, notes)
     rot = _rotation(up_ax, front_ax)
     world = (vertices @ rot.T) * scale
+    world, faces = _drop_floor(world, faces, notes)
     # Feet on y = 0, centred on x = z = 0 (bounding-box centre).
     lo, hi = world.min(axis=0), world.max(axis=0)
     shift = np.array([-(lo[0] + hi[0]) / 2, -lo[1], -(lo[2] + hi[2]) / 2])
@@ -238,6 +240,38 @@ def _fill_holes(v: np.ndarray, f: np.ndarray, name: str, notes: list[str]):
         return v, f, None
     v2, f2 = _clean(v2, f2, name, [])
     return v2, f2, (len(loops) - len(_hole_loops(v2, f2)), len(loops), float(loops.max()))
+
+
+FLOOR_THICK = 0.03  # m: a separate piece at most this tall, lying under the feet ...
+FLOOR_WIDE = 0.2  # m: ... and at least this wide is the scanner's floor or turntable, not the body
+
+
+def _drop_floor(v: np.ndarray, f: np.ndarray, notes: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Drop a floor plate the scan was captured standing on (world frame, metres): a separate
+    piece, thin and wide, whose top is no higher than 2 cm above the lowest point of the rest.
+    Kept, it adds its thickness to every height and stands in the collision maps and the walk."""
+    ncomp, label = _components(len(v), f)
+    if ncomp < 2:
+        return v, f
+    flabel = label[f[:, 0]]
+    drop = np.zeros(ncomp, bool)
+    for c in range(ncomp):
+        pts = v[np.unique(f[flabel == c])]
+        if len(pts) == 0:
+            continue
+        rest = v[np.unique(f[flabel != c])]
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        if (hi[1] - lo[1] <= FLOOR_THICK and np.hypot(hi[0] - lo[0], hi[2] - lo[2]) >= FLOOR_WIDE
+                and len(rest) and hi[1] <= rest[:, 1].min() + 0.02):
+            drop[c] = True
+            notes.append(f"dropped the floor plate under the feet ({(hi[0] - lo[0]) * 100:.0f} x "
+                         f"{(hi[2] - lo[2]) * 100:.0f} cm, {(hi[1] - lo[1]) * 100:.1f} cm thick)")
+    if not drop.any() or drop.all():
+        return v, f
+    notes[:] = [n for n in notes if not n.startswith("the body is in")]
+    if ncomp - int(drop.sum()) > 1:
+        notes.append(f"the body is in {ncomp - int(drop.sum())} separate pieces (kept all)")
+    return _compact(v, f[~drop[flabel]])
 
 
 def _compact(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
