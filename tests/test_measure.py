@@ -75,3 +75,26 @@ def test_rotated_scan_measures_the_same(tmp_path, body, meas):
     d = meas.to_dict()
     for key in ("height", "bust", "waist", "hips", "crotch_height"):
         assert abs(d2[key] - d[key]) <= 0.2, key
+
+
+def test_arms_held_closer_still_measure(body, meas):
+    """The sample scan with its arms lowered 30 degrees towards the body (the fitted default
+    skeleton, linear blend skinning): the arms join the torso one after the other, a cut apart,
+    and the armpits were not found (every upper-body measure skipped). Now it measures as the
+    A-pose does."""
+    from engine.body.fit import fit_rig
+    from engine.body.motion import _rot, pose_joints
+    from engine.body.rig import skin
+    from engine.body.types import Body
+
+    rigged = fit_rig(body)
+    posed = skin(rigged.vertices, rigged.rig, pose_joints(rigged.rig, {"upperarm01.L": _rot("z", -30.0),
+                                                                      "upperarm01.R": _rot("z", 30.0)}))
+    assert np.ptp(posed[:, 0]) < np.ptp(body.vertices[:, 0]) - 0.4  # the hands came 20+ cm closer each
+    m = measure(Body(vertices=posed, faces=body.faces, name="arms-down"))
+    assert not m.notes, m.notes
+    for k in ("bust", "underbust", "waist", "hips"):
+        assert abs(getattr(m, k) - getattr(meas, k)) < 0.01, (k, getattr(m, k), getattr(meas, k))
+    assert abs(m.shoulder_height - meas.shoulder_height) < 0.03
+    assert abs(m.shoulder_width - meas.shoulder_width) < 0.03
+    assert abs(m.arm_length - meas.arm_length) < 0.03
