@@ -208,3 +208,54 @@ def test_auto_size_dresses_the_next_size_when_the_drape_refuses_one():
     assert asked == ["M", "L", "XL"] and res == "L" and rep["tight"]
     assert [t["size"] for t in rep["sizes_tried"]] == ["M", "XL"]
     assert rep["sizes_tried"][0]["error"] == "tight: stretched 7 %"
+
+
+def test_shoulder_seams_open_with_the_arms_close_stop_at_once():
+    """default:female as a scan with its arms lowered 20 degrees (5.4 cm from the torso 10 cm
+    below the armpits, Measurements.arm_gap): a sewing failure at the shoulder seams is not
+    retried in larger sizes and says why (its arms; it did so in every size, tests/test_drape.py's
+    slow test dresses it for real). The same failure below the armpits, or on the A-pose body,
+    stays a size problem. The drape here is a stand-in that refuses every size."""
+    from engine.body.measure import ARM_GAP_OK, measure
+    from engine.body.motion import _rot, pose_joints
+    from engine.body.rig import skin
+    from engine.body.types import Body
+    from engine.errors import SimulationError
+    from engine.scene.garments import dress_in_size
+
+    a_pose = resolve_body("default:female")
+    posed = skin(a_pose.vertices, a_pose.rig, pose_joints(a_pose.rig, {"upperarm01.L": _rot("z", -20.0),
+                                                                       "upperarm01.R": _rot("z", 20.0)}))
+    scan = Body(vertices=posed, faces=a_pose.faces, name="arms-down")
+    m = measure(scan)
+    assert 0.03 < m.arm_gap < ARM_GAP_OK and measure(a_pose).arm_gap > ARM_GAP_OK
+    assert any("the arms hang" in n for n in m.notes)
+    asked = []
+
+    def refusing(at):
+        def dress(spec, place, name):
+            asked.append(name)
+            e = SimulationError("sewing did not close within 4.0 s of simulated time; open seams: "
+                                "front[1]-back[10] (15.4 cm). The garment may be too small for this "
+                                "body (try a larger size) or the panels start too far apart")
+            e.too_small, e.open_top = True, at
+            raise e
+        return dress
+
+    with pytest.raises(SimulationError) as err:
+        dress_in_size("dress", scan, "auto", refusing(m.armpit_height + 0.1))
+    assert len(asked) == 1 and not err.value.too_small
+    msg = str(err.value)
+    assert "arms hang close to its torso (5.4 cm away" in msg and "a larger size will not help" in msg
+    assert "try a larger size" not in msg and msg.startswith("sewing did not close")
+    asked.clear()
+    with pytest.raises(SimulationError, match="arms hang close"):  # an explicit size: no size hint
+        dress_in_size("dress", scan, "S", refusing(m.armpit_height + 0.1))
+    asked.clear()
+    with pytest.raises(SimulationError, match=r"--size auto tried"):  # open below the armpits: sizes
+        dress_in_size("dress", scan, "auto", refusing(m.armpit_height - 0.2))
+    assert len(asked) == 3
+    asked.clear()
+    with pytest.raises(SimulationError, match=r"--size auto tried"):  # the A-pose: sizes
+        dress_in_size("dress", a_pose, "auto", refusing(1.4))
+    assert len(asked) == 3

@@ -108,6 +108,35 @@ def test_a_garment_far_too_small_is_refused_early():
 
 
 @pytest.mark.slow
+def test_a_dress_on_a_scan_with_the_arms_close_fails_at_once_with_the_reason(tmp_path):
+    """default:female saved as a scan with its arms lowered 20 degrees (5.4 cm from the torso
+    10 cm below the armpits): the dress's right shoulder strap slides off and its shoulder seam
+    stays 15 cm open, in every size (measured: M, L, XL, 1.5-2 minutes, each error "try a larger
+    size"). `tryon drape --size auto` now stops after the first size and names the pose."""
+    import trimesh
+    from typer.testing import CliRunner
+
+    from engine.body import resolve_body
+    from engine.body.motion import _rot, pose_joints
+    from engine.body.rig import skin
+    from engine.cli import app
+
+    a_pose = resolve_body("default:female")
+    posed = skin(a_pose.vertices, a_pose.rig, pose_joints(a_pose.rig, {"upperarm01.L": _rot("z", -20.0),
+                                                                       "upperarm01.R": _rot("z", 20.0)}))
+    scan = tmp_path / "arms_down.obj"
+    trimesh.Trimesh(posed, a_pose.faces, process=False).export(scan)
+    out = tmp_path / "out"
+    r = CliRunner().invoke(app, ["drape", "--body", str(scan), "--garment", "dress", "--size", "auto",
+                                 "--out", str(out)])
+    assert r.exit_code != 0
+    text = r.stderr
+    assert "arms hang close to its torso (5.4 cm away" in text and "a larger size will not help" in text
+    assert "trying L" not in text  # no second size
+    assert not (out / "report.json").exists()
+
+
+@pytest.mark.slow
 def test_sample_skirt_quality(tmp_path):
     from engine.body import resolve_body
     from engine.pattern.io import load_pattern

@@ -180,6 +180,8 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
                                   "(try a larger size) or the panels start too far apart")
             err.positions, err.triangles = state.x.copy(), _triangles(model)  # for a picture
             err.too_small = True  # (engine.scene.garments.add_size_hint)
+            # where the open seams were placed (engine.scene.garments.arms_in_the_way)
+            err.open_top = float(garment.positions[pairs[~welded].ravel(), 1].max())
             raise err
         # merge the sewn vertices and continue on the welded model
         vmap = merge_map(model.n, pairs)

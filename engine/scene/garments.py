@@ -48,6 +48,28 @@ def add_size_hint(err: Exception, arg: str, body: Body, size: str | None) -> Non
 AUTO_TRIES = 2  # --size auto: the recommended size and at most this many larger ones
 
 
+def arms_in_the_way(err: Exception, body: Body) -> bool:
+    """A sewing failure whose open seams start at the shoulders (above the armpits) on a body
+    whose arms hang closer to the torso than ARM_GAP_OK: rewrite the error to say so (a larger
+    size will not help; the scan's pose will) and mark it not `too_small`. True if so."""
+    top = getattr(err, "open_top", None)
+    if top is None:
+        return False
+    from engine.body.measure import ARM_GAP_BELOW, ARM_GAP_OK, measure
+
+    m = measure(body)
+    if not (m.arm_gap < ARM_GAP_OK and top > m.armpit_height - 0.05):
+        return False
+    head = str(err).split(". The garment may be too small")[0]
+    err.args = (f"{head}. This body's arms hang close to its torso ({100 * m.arm_gap:.1f} cm away "
+                f"{100 * ARM_GAP_BELOW:.0f} cm below the armpits): seams over the shoulders are sewn "
+                f"reliably with the arms at least {100 * ARM_GAP_OK:.0f} cm away there (an A-pose, arms "
+                "about 45 degrees from the body), and a larger size will not help. Scan the body in "
+                "that pose, or try a skirt or trousers",) + tuple(err.args[1:])
+    err.too_small = False
+    return True
+
+
 def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
     """Resolve GARMENT and dress the body with `dress(spec, place, name) -> (result, report)`.
     With --size auto on a catalogue garment, the size recommended from the body's girths comes
@@ -58,7 +80,9 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
     sizes found too small and why; `note(size, why, next size)` is called before each retry.
     When every size tried is too small, the least stretched tight result is returned (its
     warnings say so), or the last refusal raised. Other sizes and pattern files are dressed
-    once; a too-small error then names the size auto would pick (add_size_hint)."""
+    once; a too-small error then names the size auto would pick (add_size_hint). Seams over the
+    shoulders that cannot close on a body whose arms hang close to its torso end the try-on at
+    once with that reason (arms_in_the_way), in any size."""
     from engine.errors import SimulationError
     from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES, make_garment, recommend_size
 
@@ -67,7 +91,8 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
         try:
             return dress(spec, place, name)
         except SimulationError as e:
-            add_size_hint(e, arg, body, size)
+            if not arms_in_the_way(e, body):
+                add_size_hint(e, arg, body, size)
             raise
     first = SIZES.index(recommend_size(arg, body))
     sizes = SIZES[first:first + 1 + AUTO_TRIES]
@@ -80,7 +105,7 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
         try:
             res, report = dress(spec, place, name[:-1] + f", {how})")
         except SimulationError as e:
-            if not getattr(e, "too_small", False):
+            if not getattr(e, "too_small", False) or arms_in_the_way(e, body):
                 raise
             if k == len(sizes) - 1 and tight is None:
                 e.args = (f"{e} (--size auto tried {', '.join([t['size'] for t in tried] + [s])})",) \
