@@ -49,20 +49,21 @@ AUTO_TRIES = 2  # --size auto: the recommended size and at most this many larger
 
 
 def arms_in_the_way(err: Exception, body: Body) -> bool:
-    """A sewing failure whose open seams start at the shoulders (above the armpits) on a body
-    whose arms hang closer to the torso than ARM_GAP_OK: rewrite the error to say so (a larger
-    size will not help; the scan's pose will) and mark it not `too_small`. True if so."""
+    """A sewing failure whose open seams start beside the arms (above 15 cm under the armpits:
+    over the shoulders, under the arms) on a body whose arms hang closer to the torso than
+    ARM_GAP_OK: rewrite the error to say so (a larger size will not help; the scan's pose will)
+    and mark it not `too_small`. True if so."""
     top = getattr(err, "open_top", None)
     if top is None:
         return False
     from engine.body.measure import ARM_GAP_BELOW, ARM_GAP_OK, measure
 
     m = measure(body)
-    if not (m.arm_gap < ARM_GAP_OK and top > m.armpit_height - 0.05):
+    if not (m.arm_gap < ARM_GAP_OK and top > m.armpit_height - ARM_GAP_BELOW - 0.05):
         return False
     head = str(err).split(". The garment may be too small")[0]
     err.args = (f"{head}. This body's arms hang close to its torso ({100 * m.arm_gap:.1f} cm away "
-                f"{100 * ARM_GAP_BELOW:.0f} cm below the armpits): seams over the shoulders are sewn "
+                f"{100 * ARM_GAP_BELOW:.0f} cm below the armpits): the seams beside the arms are sewn "
                 f"reliably with the arms at least {100 * ARM_GAP_OK:.0f} cm away there (an A-pose, arms "
                 "about 45 degrees from the body), and a larger size will not help. Scan the body in "
                 "that pose, or try a skirt or trousers",) + tuple(err.args[1:])
