@@ -101,3 +101,23 @@ def test_arms_held_closer_still_measure(body, meas):
     assert abs(m.shoulder_height - meas.shoulder_height) < 0.03
     assert abs(m.shoulder_width - meas.shoulder_width) < 0.03
     assert abs(m.arm_length - meas.arm_length) < 0.03
+
+
+def test_measurements_are_cached_by_the_mesh_content(body, meas):
+    """measure() keeps the last bodies' results by a digest of the mesh: the same mesh again (a
+    try-on measures its body 3-6 times) gives equal values in its own copy; a moved mesh is
+    measured anew."""
+    import time
+
+    from engine.body.types import Body
+
+    again_body = Body(vertices=body.vertices.copy(), faces=body.faces.copy(), name="copy")
+    t = time.perf_counter()
+    again = measure(again_body)
+    assert time.perf_counter() - t < 0.2  # from the cache (a measurement takes ~1 s)
+    assert again == meas and again is not meas
+    again.notes.append("mine")
+    again.bust = 0.0
+    assert measure(body).bust == meas.bust and "mine" not in measure(body).notes
+    taller = measure(Body(vertices=body.vertices * np.array([1.0, 1.1, 1.0]), faces=body.faces))
+    assert abs(taller.height - 1.1 * meas.height) < 1e-6

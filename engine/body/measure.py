@@ -6,6 +6,9 @@ y = 0). Scans have no segments or rig, so nothing here needs them.
 
 from __future__ import annotations
 
+import copy
+import hashlib
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -284,8 +287,35 @@ def _weighted_median(x: np.ndarray, w: np.ndarray) -> float:
     return float(x[order][np.searchsorted(cw, 0.5 * cw[-1])])
 
 
+_CACHE: "OrderedDict[bytes, Measurements]" = OrderedDict()
+CACHE_SIZE = 8  # bodies whose measurements are kept (a try-on measures its body 3-6 times, ~1 s each)
+
+
 def measure(body) -> Measurements:
-    """Measure a normalised Body (see Measurements for the definitions used)."""
+    """Measure a normalised Body (see Measurements for the definitions used). The result is
+    cached by the mesh's content (a digest of its vertex and face bytes), so asking again for
+    the same mesh -- the size chart, the pattern, the fit check of one try-on -- costs ~1 ms;
+    the caller gets its own copy."""
+    key = _digest(body)
+    if key in _CACHE:
+        _CACHE.move_to_end(key)
+        return copy.deepcopy(_CACHE[key])
+    m = _measure(body)
+    _CACHE[key] = copy.deepcopy(m)
+    while len(_CACHE) > CACHE_SIZE:
+        _CACHE.popitem(last=False)
+    return m
+
+
+def _digest(body) -> bytes:
+    h = hashlib.blake2b(digest_size=16)
+    for a in (np.ascontiguousarray(body.vertices, dtype=np.float64), np.ascontiguousarray(body.faces, dtype=np.int64)):
+        h.update(str(a.shape).encode())
+        h.update(a.tobytes())
+    return h.digest()
+
+
+def _measure(body) -> Measurements:
     v = np.asarray(body.vertices, dtype=np.float64)
     f = np.asarray(body.faces, dtype=np.int64)
     m = Measurements()
