@@ -10,9 +10,10 @@ written to Body.notes.
 Holes: scanners leave the crown, the soles, armpits and the crotch open, and drop scattered
 triangles. A horizontal cut through a hole is not a closed loop, so measurements read nonsense
 (measured on the sample scan with such holes cut in, tests/test_body_load.py: bust 128.5 cm
-instead of 97.5, waist 56.9 at 1.20 m, shoulders 8 cm wide) and the collision maps see into the body. Every hole is
-closed with MeshFix (pymeshfix: boundary loops triangulated and refined, the scan's own
-vertices and faces kept); the note says how many and how large.
+instead of 97.5, waist 56.9 at 1.20 m, shoulders 8 cm wide) and the collision maps see into
+the body. Every hole is closed with MeshFix (pymeshfix: boundary loops triangulated and
+refined, the scan's own vertices and faces kept); the note says how many and how large. A hole
+that spans the gap between an arm and the torso is bridged (the armpits are then found low).
 """
 
 from __future__ import annotations

@@ -235,10 +235,10 @@ ARM_GAP_BELOW = 0.10  # m below the armpits where Measurements.arm_gap is taken
 # (11.2 cm) and default:female (12.7 cm) sew; with the arms 10 degrees closer (7.2, 8.7 cm) a
 # shoulder seam stayed 1.8 and 16.5 cm open, at 20 degrees (3.7, 5.4 cm) 2.1 and 15.4 cm, at 30
 # (0.9, 2.4 cm) 7-10 and 3.9 cm (the sample scan at 30 degrees in L, XL and XXL alike,
-# default:female at 20 in M, L and XL; the others in one size). The strap's front half, pulled straight
-# towards its back half (DrapeOptions: sewing), meets the shoulder where it turns into the arm
-# and slides off (object-space collision too). Lifting the strap pairs while they close sewed
-# the 10-degree bodies but left tucks across default shirts (not adopted)
+# default:female at 20 in M, L and XL; the others in one size). The strap's front half, pulled
+# straight towards its back half (engine.cloth.welds.pull_seams), meets the shoulder where it
+# turns into the arm and slides off (object-space collision too). Lifting the strap pairs while
+# they close sewed the 10-degree bodies but left tucks across default shirts (not adopted)
 ARM_GAP_OK = 0.10
 
 

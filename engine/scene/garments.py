@@ -81,8 +81,8 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
     sizes found too small and why; `note(size, why, next size)` is called before each retry.
     When every size tried is too small, the least stretched tight result is returned (its
     warnings say so), or the last refusal raised. Other sizes and pattern files are dressed
-    once; a too-small error then names the size auto would pick (add_size_hint). Seams over the
-    shoulders that cannot close on a body whose arms hang close to its torso end the try-on at
+    once; a too-small error then names the size auto would pick (add_size_hint). Seams beside
+    the arms that cannot close on a body whose arms hang close to its torso end the try-on at
     once with that reason (arms_in_the_way), in any size."""
     from engine.errors import SimulationError
     from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES, make_garment, recommend_size
