@@ -84,11 +84,11 @@ def load_body_file(path, up: str | None = None, front: str | None = None,
     faces = _orient(world, faces, notes)
     notes.insert(0, f"units: {unit} (height {extent:.4g} in file units -> {world[:, 1].max():.3f} m)")
     notes.insert(1, f"axes: up {_axis_name(up_ax)}, front {_axis_name(front_ax)} (file coordinates)")
+    left = _report_holes(world, faces, notes)
     if filled is not None:
-        closed, found, largest = filled
-        notes.insert(2, f"closed {closed} of {found} hole(s) in the surface with MeshFix (largest "
+        found, largest = filled
+        notes.insert(2, f"closed {found - left} of {found} hole(s) in the surface with MeshFix (largest "
                         f"{largest * scale * 100:.1f} cm around)")
-    _report_holes(world, faces, notes)
     return Body(vertices=world, faces=faces.astype(np.int32), name=path.stem, notes=notes,
                 to_world=to_world)
 
@@ -222,7 +222,7 @@ def _clean(v: np.ndarray, f: np.ndarray, name: str, notes: list[str]) -> tuple[n
 
 def _fill_holes(v: np.ndarray, f: np.ndarray, name: str, notes: list[str]):
     """Close every hole of the surface with MeshFix (module doc). Returns (v, f, None) for a
-    mesh without holes, else (v, f, (holes closed, holes found, largest loop in file units)).
+    mesh without holes, else (v, f, (holes found, largest loop in file units)).
     The filled mesh is cleaned again (MeshFix splits vertices where the surface is not a
     manifold; those duplicates are merged back, silently: they are not the file's)."""
     loops = _hole_loops(v, f)
@@ -240,7 +240,7 @@ def _fill_holes(v: np.ndarray, f: np.ndarray, name: str, notes: list[str]):
         notes.append(f"{len(loops)} hole(s) could not be closed (MeshFix failed on this mesh)")
         return v, f, None
     v2, f2 = _clean(v2, f2, name, [])
-    return v2, f2, (len(loops) - len(_hole_loops(v2, f2)), len(loops), float(loops.max()))
+    return v2, f2, (len(loops), float(loops.max()))
 
 
 FLOOR_THICK = 0.03  # m: a separate piece at most this tall, lying under the feet ...
@@ -251,19 +251,16 @@ def _drop_floor(v: np.ndarray, f: np.ndarray, notes: list[str]) -> tuple[np.ndar
     """Drop a floor plate the scan was captured standing on (world frame, metres): a separate
     piece, thin and wide, whose top is no higher than 2 cm above the lowest point of the rest.
     Kept, it adds its thickness to every height and stands in the collision maps and the walk."""
-    ncomp, label = _components(len(v), f)
+    ncomp, label = _components(len(v), f)  # (every vertex is used: the mesh is compacted)
     if ncomp < 2:
         return v, f
     flabel = label[f[:, 0]]
     drop = np.zeros(ncomp, bool)
     for c in range(ncomp):
-        pts = v[np.unique(f[flabel == c])]
-        if len(pts) == 0:
-            continue
-        rest = v[np.unique(f[flabel != c])]
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        mine = label == c
+        lo, hi = v[mine].min(axis=0), v[mine].max(axis=0)
         if (hi[1] - lo[1] <= FLOOR_THICK and np.hypot(hi[0] - lo[0], hi[2] - lo[2]) >= FLOOR_WIDE
-                and len(rest) and hi[1] <= rest[:, 1].min() + 0.02):
+                and hi[1] <= v[~mine, 1].min() + 0.02):
             drop[c] = True
             notes.append(f"dropped the floor plate under the feet ({(hi[0] - lo[0]) * 100:.0f} x "
                          f"{(hi[2] - lo[2]) * 100:.0f} cm, {(hi[1] - lo[1]) * 100:.1f} cm thick)")
@@ -321,13 +318,13 @@ def _hole_loops(v: np.ndarray, f: np.ndarray) -> np.ndarray:
     return loop_len[loop_len > 0]
 
 
-def _report_holes(v: np.ndarray, f: np.ndarray, notes: list[str]) -> None:
-    """Count the holes left (boundary loops) and the largest one's length."""
+def _report_holes(v: np.ndarray, f: np.ndarray, notes: list[str]) -> int:
+    """Note the holes left (boundary loops) and the largest one's length; returns their count."""
     loops = _hole_loops(v, f)
-    if len(loops) == 0:
-        return
-    notes.append(f"{len(loops)} hole(s) in the surface, largest {loops.max() * 100:.1f} cm around "
-                 "(measurements across a hole are approximate)")
+    if len(loops):
+        notes.append(f"{len(loops)} hole(s) in the surface, largest {loops.max() * 100:.1f} cm around "
+                     "(measurements across a hole are approximate)")
+    return len(loops)
 
 
 # --------------------------------------------------------------------------- axes

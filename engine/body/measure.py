@@ -380,18 +380,17 @@ def _find_armpit(prof: _Profile, h: float, crotch: float, m: Measurements) -> fl
     # cut k much narrower than one of the ARMPIT_CUTS cuts above it: arms held close to the body
     # join the torso one after the other, a cut apart (a scan with its arms 30 degrees closer
     # than the sample's A-pose: widths 32, 40, 47 cm, no single step below 0.8)
-    above = np.full((ARMPIT_CUTS, len(width)), np.nan)
+    above = np.full((ARMPIT_CUTS, len(width)), -np.inf)  # width of the j-th cut above (-inf: none)
     for j in range(1, ARMPIT_CUTS + 1):
-        above[j - 1, :-j] = width[j:]
+        above[j - 1, :-j] = np.nan_to_num(width[j:], nan=-np.inf)
     with np.errstate(invalid="ignore"):
-        wider = np.nanmax(np.where(np.isnan(above), -np.inf, above), axis=0)
-        drop = width < 0.8 * wider
+        drop = width < 0.8 * above.max(axis=0)
     ks = np.nonzero(drop)[0]
     if len(ks) == 0:
         m.notes.append("could not find the armpits: upper-body measures skipped")
         return float("nan")
     k = ks.max()
-    j = 1 + int(np.argmax(np.where(np.isnan(above[:, k]), -np.inf, above[:, k])))
+    j = 1 + int(np.argmax(above[:, k]))
     w_lo, w_hi = width[k], width[k + j]
     thresh = 0.5 * (w_lo + w_hi)
 
