@@ -156,6 +156,21 @@ def test_sleeves_go_on_a_scans_arms():
         assert reach > 0.5, f"{name} reaches only {100 * reach:.0f} cm out"
 
 
+def test_an_arm_axis_ending_on_its_own_point_still_places_a_sleeve():
+    """default:female as a scan with its arms lowered 30 degrees: the fitted skeleton's arm
+    centre line ended on the very point it was extended to, and the shirt's placement died with
+    numpy's "arange: cannot compute length". Repeated points are dropped; an axis with no length
+    is a clear error."""
+    from engine.errors import InputError
+    from engine.garment.place import arm_path
+
+    p = np.array([[0.15, 1.38, 0.0], [0.18, 1.1, 0.15], [0.25, 0.86, 0.17], [0.25, 0.86, 0.17]])
+    path = arm_path(p)
+    assert np.isfinite(path).all() and len(path) > 100
+    with pytest.raises(InputError, match="arm's axis"):
+        arm_path(np.repeat(p[:1], 3, axis=0))
+
+
 def test_auto_size_dresses_the_next_size_when_the_drape_refuses_one():
     """--size auto: the girths' size is dressed first; a drape that refuses it as too small
     (SimulationError marked too_small) makes the next larger size dressed, at most AUTO_TRIES
@@ -213,15 +228,17 @@ def test_auto_size_dresses_the_next_size_when_the_drape_refuses_one():
 def test_shoulder_seams_open_with_the_arms_close_stop_at_once():
     """default:female as a scan with its arms lowered 20 degrees (5.4 cm from the torso 10 cm
     below the armpits, Measurements.arm_gap): a sewing failure beside the arms is not retried in
-    larger sizes and says why (its arms; tests/test_drape.py's slow test dresses such a body for
+    larger sizes and says why (its arms; tests/test_drape.py's slow tests dress such bodies for
     real). The same failure lower down, or on the A-pose body, stays a size problem. The drape
-    here is a stand-in that refuses every size."""
+    here is a stand-in that refuses every size. Such a body is sewn with friction (the A-pose
+    body without)."""
     from engine.body.measure import ARM_GAP_OK, measure
     from engine.body.motion import _rot, pose_joints
     from engine.body.rig import skin
     from engine.body.types import Body
     from engine.errors import SimulationError
     from engine.scene.garments import dress_in_size
+    from engine.scene.tryon import ARMS_CLOSE_SEW_FRICTION, sewing_friction
 
     a_pose = resolve_body("default:female")
     posed = skin(a_pose.vertices, a_pose.rig, pose_joints(a_pose.rig, {"upperarm01.L": _rot("z", -20.0),
@@ -230,6 +247,7 @@ def test_shoulder_seams_open_with_the_arms_close_stop_at_once():
     m = measure(scan)
     assert 0.03 < m.arm_gap < ARM_GAP_OK and measure(a_pose).arm_gap > ARM_GAP_OK
     assert any("the arms hang" in n for n in m.notes)
+    assert sewing_friction(scan)[0] == ARMS_CLOSE_SEW_FRICTION and sewing_friction(a_pose) == (0.0, None)
     asked = []
 
     def refusing(at):

@@ -238,7 +238,10 @@ ARM_GAP_BELOW = 0.10  # m below the armpits where Measurements.arm_gap is taken
 # default:female at 20 in M, L and XL; the others in one size). The strap's front half, pulled
 # straight towards its back half (engine.cloth.welds.pull_seams), meets the shoulder where it
 # turns into the arm and slides off (object-space collision too). Lifting the strap pairs while
-# they close sewed the 10-degree bodies but left tucks across default shirts (not adopted)
+# they close sewed the 10-degree bodies but left tucks across default shirts (not adopted);
+# so did lifting the placed straps' ends above the shoulder (the strained straps sprang down).
+# Below this gap the panels are sewn with friction (engine.scene.tryon.ARMS_CLOSE_SEW_FRICTION),
+# which sews default:female's dress at 10 and 20 degrees but not at 30 nor the sample's at 10
 ARM_GAP_OK = 0.10
 
 
@@ -344,7 +347,8 @@ def _measure(body) -> Measurements:
     if m.arm_gap < ARM_GAP_OK:
         m.notes.append(f"the arms hang {100 * m.arm_gap:.1f} cm from the torso {100 * ARM_GAP_BELOW:.0f} cm below "
                        f"the armpits: dresses and tops are sewn reliably from {100 * ARM_GAP_OK:.0f} cm (an "
-                       "A-pose, arms about 45 degrees from the body)")
+                       "A-pose, arms about 45 degrees from the body); closer, they are sewn with friction "
+                       "and may not close")
     _torso_girths(prof, h, crotch, armpit, m)
     _knee(prof, h, crotch, m)
     acromion = _shoulders(v, prof, h, armpit, m)

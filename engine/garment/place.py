@@ -212,6 +212,13 @@ def arm_path(points: np.ndarray, step: float = 0.005, smooth: float = 0.06) -> n
     smoothed over `smooth` metres so that a sleeve wrapped around it has no crease at the elbow.
     The path is extended 15 cm beyond both ends (straight) so every sleeve point finds its ring."""
     p = np.asarray(points, dtype=np.float64)
+    # repeated points (an arm centre line that ends on the wrist it was extended to) have no
+    # direction: drop them (measured: NaN arc lengths, "arange: cannot compute length")
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(p, axis=0), axis=1) > 1e-6])
+    p = p[keep]
+    if len(p) < 2 or not np.isfinite(p).all():
+        raise InputError("could not find the arm's axis to place the sleeve: the arms may touch "
+                         "the body; a scan in an A-pose (arms about 45 degrees from the body) works")
     d0 = (p[1] - p[0]) / np.linalg.norm(p[1] - p[0])
     d1 = (p[-1] - p[-2]) / np.linalg.norm(p[-1] - p[-2])
     ext = np.concatenate([[p[0] - 0.15 * d0], p, [p[-1] + 0.15 * d1]])

@@ -49,7 +49,9 @@ class DrapeOptions:
     sew_tau: float = 0.02  # s: a seam pair is pulled to close its gap in this time ...
     sew_vmax: float = 3.0  # m/s: ... at most this fast
     sew_damping: float = 20.0  # x the viscous damping while sewing (no flapping)
-    sew_friction: float = 0.0  # x the fabric's friction while sewing
+    sew_friction: float | None = None  # x the fabric's friction while sewing; None: 0 (the panels
+    # slide over the body into place), or ARMS_CLOSE_SEW_FRICTION on a body whose arms hang close
+    # to its torso (engine.scene.tryon.sewing_friction decides)
     sew_gravity: float = 1.0  # x gravity while sewing (a flared skirt without gravity opens into a disc)
     drape_damping: float = 1000.0  # x the viscous damping while draping (a static result: settle;
     # measured on the skirt: 250 -> 14.9k-24k iterations, 1000 -> 13.3k, 3000 -> 24k: falls too slowly)
@@ -142,7 +144,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
         snap_from = int(o.snap_after / dt)
         for it in range(budget):
             g = g_sewn = o.sew_gravity * min(1.0, (it + 1) * dt / o.gravity_ramp)  # let the seams catch first
-            solver.step(state, gravity_scale=g, damping_scale=o.sew_damping, friction_scale=o.sew_friction)
+            solver.step(state, gravity_scale=g, damping_scale=o.sew_damping, friction_scale=o.sew_friction or 0.0)
             hold_welds(state.x, state.v, model.mass, pairs, welded)
             if observer is not None and it % observe == 0:
                 observer("sewing", state.x, tri0, None)
