@@ -138,6 +138,17 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
     def body_out(row: dict) -> dict:
         return {"id": row["id"], "kind": row["kind"], "name": row["name"], "info": json.loads(row["info"] or "{}")}
 
+    def measure_notes(b) -> list[str]:
+        """What the measurements say about a scan before it is dressed (arms held too close for
+        tops, armpits not found...), or why they cannot be taken."""
+        from engine.body.measure import measure
+        from engine.errors import TryonError
+
+        try:
+            return list(measure(b).notes)
+        except TryonError as e:
+            return [f"the body could not be measured, so catalogue garments cannot be sized for it: {e}"]
+
     @app.post("/api/bodies", status_code=201)
     async def upload_body(file: UploadFile = File(...), fps: float = Form(30.0), who: str = Depends(owner)):
         """A scan (a mesh file), or an animated body: a .zip of OBJ frames (one topology) played
@@ -167,7 +178,7 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
                 from engine.body.load import load_body_file
 
                 b = await run_in_threadpool(load_body_file, dest)
-                kind, notes, extra = "upload", b.notes, {}
+                kind, notes, extra = "upload", list(b.notes) + await run_in_threadpool(measure_notes, b), {}
         except TryonError as e:
             dest.unlink(missing_ok=True)
             raise HTTPException(400, str(e).replace(dest.name, file.filename or dest.name)) from None

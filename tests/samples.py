@@ -21,3 +21,20 @@ def write_anim_zip(path, frames, faces, names=None):
             buf.write("".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces))
             z.writestr(names[k] if names else f"frames/f_{k:03d}.obj", buf.getvalue())
     return path
+
+
+def write_arms_lowered_scan(path, degrees: float):
+    """default:female with its upper arms turned `degrees` towards the body, saved as an OBJ
+    scan (no skeleton, no segment labels): at 20 degrees its arms hang 5.4 cm from the torso
+    10 cm below the armpits, at 30 degrees 2.4 cm (the A-pose: 12.7 cm)."""
+    import trimesh
+
+    from engine.body import resolve_body
+    from engine.body.motion import _rot, pose_joints
+    from engine.body.rig import skin
+
+    a_pose = resolve_body("default:female")
+    posed = skin(a_pose.vertices, a_pose.rig, pose_joints(a_pose.rig, {"upperarm01.L": _rot("z", -degrees),
+                                                                       "upperarm01.R": _rot("z", degrees)}))
+    trimesh.Trimesh(posed, a_pose.faces, process=False).export(path)
+    return path

@@ -9,7 +9,7 @@ from fastapi.testclient import TestClient
 
 from app.main import create_app
 from app.settings import Settings
-from tests.samples import SAMPLE_BODY, SAMPLE_SKIRT, write_anim_zip
+from tests.samples import SAMPLE_BODY, SAMPLE_SKIRT, write_anim_zip, write_arms_lowered_scan
 
 
 def _settings(tmp_path, **kw):
@@ -82,6 +82,22 @@ def test_upload_body_and_pattern(idle):
     assert "dress" in [x["name"] for x in g["catalogue"]] and "M" in g["sizes"] and "silk" in g["fabrics"]
     assert g["sizes"][-1] == "auto"  # the smallest size that covers the body's girths
     assert len(g["uploaded"]) == 1
+
+
+def test_upload_says_what_the_loader_and_the_measurements_found(idle, tmp_path):
+    """A scan's notes come back with the upload: the loader's (units, axes) and the
+    measurements' (arms held too close to the torso for tops), before anything is dressed."""
+    h = token(idle)
+    scan = write_arms_lowered_scan(tmp_path / "arms down.obj", 20.0)
+    with open(scan, "rb") as f:
+        r = idle.post("/api/bodies", files={"file": ("arms down.obj", f)}, headers=h)
+    assert r.status_code == 201, r.text
+    notes = r.json()["info"]["notes"]
+    assert any(n.startswith("units: metres") for n in notes), notes
+    assert any(n.startswith("the arms hang 5.4 cm from the torso") for n in notes), notes
+    with open(SAMPLE_BODY, "rb") as f:  # its arms are 11.2 cm away: nothing to say about them
+        notes = idle.post("/api/bodies", files={"file": ("me.obj", f)}, headers=h).json()["info"]["notes"]
+    assert notes and not any("arms hang" in n for n in notes), notes
 
 
 def test_upload_size_cap(tmp_path):

@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from engine.cli import app
-from tests.samples import SAMPLE_BODY, SAMPLE_SKIRT
+from tests.samples import SAMPLE_BODY, SAMPLE_SKIRT, write_arms_lowered_scan
 
 REPORT_KEYS = {"cloth_vertices", "iterations", "ms_per_iteration", "wall_seconds", "penetration_mm", "strain",
                "seam_gap_mm", "settled", "left_out", "shift_mm", "warnings"}
@@ -107,23 +107,6 @@ def test_a_garment_far_too_small_is_refused_early():
     assert e.value.too_small and e.value.positions.shape[1] == 3
 
 
-def _arms_lowered_scan(tmp_path, degrees: float):
-    """default:female, its upper arms turned `degrees` towards the body, saved as an OBJ scan
-    (no skeleton, no segment labels)."""
-    import trimesh
-
-    from engine.body import resolve_body
-    from engine.body.motion import _rot, pose_joints
-    from engine.body.rig import skin
-
-    a_pose = resolve_body("default:female")
-    posed = skin(a_pose.vertices, a_pose.rig, pose_joints(a_pose.rig, {"upperarm01.L": _rot("z", -degrees),
-                                                                       "upperarm01.R": _rot("z", degrees)}))
-    scan = tmp_path / f"arms_down_{degrees:g}.obj"
-    trimesh.Trimesh(posed, a_pose.faces, process=False).export(scan)
-    return scan
-
-
 @pytest.mark.slow
 def test_a_dress_on_a_scan_with_the_arms_closer_is_sewn_with_friction(tmp_path):
     """default:female as a scan with its arms lowered 20 degrees (5.4 cm from the torso 10 cm
@@ -137,7 +120,7 @@ def test_a_dress_on_a_scan_with_the_arms_closer_is_sewn_with_friction(tmp_path):
     from engine.scene.garments import resolve_garment
     from engine.scene.tryon import ARMS_CLOSE_SEW_FRICTION, run_tryon
 
-    body = resolve_body(str(_arms_lowered_scan(tmp_path, 20.0)))
+    body = resolve_body(str(write_arms_lowered_scan(tmp_path / "arms20.obj", 20.0)))
     spec, place, name = resolve_garment("dress", body, "L")
     _, rep = run_tryon(body, spec, place=place, source=name)
     assert rep["sew_friction"]["scale"] == ARMS_CLOSE_SEW_FRICTION
@@ -159,7 +142,7 @@ def test_a_dress_on_a_scan_with_the_arms_close_fails_at_once_with_the_reason(tmp
 
     from engine.cli import app
 
-    scan = _arms_lowered_scan(tmp_path, 30.0)
+    scan = write_arms_lowered_scan(tmp_path / "arms30.obj", 30.0)
     out = tmp_path / "out"
     r = CliRunner().invoke(app, ["drape", "--body", str(scan), "--garment", "dress", "--size", "auto",
                                  "--out", str(out)])

@@ -120,6 +120,24 @@ def test_page_dresses_the_default_avatar(server, tmp_path):
     assert errors == [], errors
 
 
+def test_page_shows_what_was_found_in_a_scan_when_it_is_chosen(server, tmp_path):
+    """Choosing a scan uploads it at once; the page shows its height and the notes of the loader
+    and the measurements (here: arms held closer than tops need) before anything is dressed."""
+    from tests.samples import write_arms_lowered_scan
+
+    scan = write_arms_lowered_scan(tmp_path / "arms down.obj", 20.0)
+    with _page(server) as (page, errors):
+        page.set_input_files("#scan", str(scan))
+        page.wait_for_selector("#bodynotes li", timeout=60_000)
+        assert page.is_checked("input[name=bodykind][value=scan]")
+        assert "arms down.obj: 165.0 cm tall" in page.inner_text("#bodyinfo")
+        notes = page.inner_text("#bodynotes")
+        assert "the arms hang 5.4 cm from the torso" in notes and "units: metres" in notes
+        assert page.inner_text("#status").startswith("Body loaded")
+        page.screenshot(path=str(SHOTS / "5-scan-notes.png"))
+    assert errors == [], errors
+
+
 def test_page_plays_an_uploaded_animation(server, tmp_path):
     """A user uploads a moving body (a zip of OBJ frames) through the page, at its frame rate,
     with Motion "walking": the result is the animation, played as uploaded."""
