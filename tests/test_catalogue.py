@@ -277,3 +277,24 @@ def test_shoulder_seams_open_with_the_arms_close_stop_at_once():
     with pytest.raises(SimulationError, match=r"--size auto tried"):  # the A-pose: sizes
         dress_in_size("dress", a_pose, "auto", refusing(1.4))
     assert len(asked) == 3
+
+
+def test_armholes_go_deeper_round_thick_arms():
+    """The underarm point sits SCYE x height below the shoulder, or ARMHOLE_PER_ARM_ROOT x the
+    arm root's cut below the body's armpit when that is lower (thick arms). The default bodies
+    keep their armholes; the sample scan's and a heavy avatar's go deeper (their L and M
+    sleeveless shirts were 13 and 32 % stretched round the armholes; the slow tests drape them)."""
+    from engine.body.measure import measure
+    from engine.pattern.catalogue import ARMHOLE_PER_ARM_ROOT, SCYE_MEN, SCYE_WOMEN, _fit
+    from tests.samples import SAMPLE_BODY
+
+    for spec, scye in (("default:female", SCYE_WOMEN), ("default:male", SCYE_MEN)):
+        b = resolve_body(spec)
+        m = measure(b)
+        assert abs(_fit(b, "M").armpit_h - 100 * (m.shoulder_height - scye * m.height)) < 1e-9
+    for spec, deeper in ((str(SAMPLE_BODY), 1.6), ("default:female,gender=0.5,weight=1", 3.9)):
+        b = resolve_body(spec)
+        m = measure(b)
+        f = _fit(b, "M")
+        assert abs(f.armpit_h - 100 * (m.armpit_height - ARMHOLE_PER_ARM_ROOT * m.arm_root)) < 1e-9
+        assert abs(100 * (m.shoulder_height - SCYE_WOMEN * m.height) - f.armpit_h - deeper) < 0.1, spec

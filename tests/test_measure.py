@@ -122,3 +122,23 @@ def test_measurements_are_cached_by_the_mesh_content(body, meas):
     assert measure(body).bust == meas.bust and "mine" not in measure(body).notes
     taller = measure(Body(vertices=body.vertices * np.array([1.0, 1.1, 1.0]), faces=body.faces))
     assert abs(taller.height - 1.1 * meas.height) < 1e-6
+
+
+def test_a_belly_in_front_of_the_chest_is_not_the_bust():
+    """default:male at weight 1 (the page's sliders): his belly stands further forward than his
+    chest, at the lower edge of the region searched for the bust point; the bust point was put
+    there (at the waist) and bust, underbust and --size auto came out n/a. The bust point is now
+    the front profile's peak; the default bodies' figures are unchanged."""
+    from engine.body import resolve_body
+    from engine.pattern.catalogue import recommend_size
+
+    for spec, size in (("default:male,weight=1", "L"), ("default:male,height=1.45,weight=1", "S")):
+        b = resolve_body(spec)
+        m = measure(b)
+        assert np.isfinite(m.bust) and np.isfinite(m.underbust), (spec, m.notes)
+        assert m.bust_height > m.waist_height + 0.05 and m.armpit_height - m.bust_height < 0.06 * m.height
+        assert m.underbust < m.bust and m.waist < m.bust
+        assert recommend_size("shirt", b) == size  # men's chart: 102.7/90.3/105.4 cm, 92.3/81.5/93.6 cm
+    for spec, bust, height in (("default:female", 0.850, 1.195), ("default:male", 1.005, 1.285)):
+        m = measure(resolve_body(spec))
+        assert abs(m.bust - bust) < 0.002 and abs(m.bust_height - height) < 0.003, (spec, m.bust, m.bust_height)

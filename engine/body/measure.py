@@ -202,6 +202,9 @@ class Measurements:
     armpit_height: float = float("nan")  # where the arms join the torso (_find_armpit)
     arm_gap: float = float("nan")  # ARM_GAP_BELOW under the armpits: the narrower of the two
     # gaps between the torso and an arm (0: an arm touches the torso; NaN: no arm hangs there)
+    arm_root: float = float("nan")  # ARM_ROOT_BELOW under the armpits: the mean perimeter (convex
+    # hull) of the two arms' horizontal cuts -- oblique on an arm held out, so larger than the
+    # arm's girth; how thick the arm is where an armhole goes round it
     notes: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict:
@@ -229,6 +232,7 @@ class Measurements:
 STEP = 0.005  # m between profile cuts; landmarks are then refined by bisection
 ARMPIT_CUTS = 3  # the armpits: where the torso cut widens by a quarter within this many cuts up
 ARM_GAP_BELOW = 0.10  # m below the armpits where Measurements.arm_gap is taken
+ARM_ROOT_BELOW = 0.03  # m below the armpits where Measurements.arm_root is taken
 # The gap from which the seams beside the arms (over the shoulders, under the arms) are sewn
 # reliably (engine.scene.garments.arms_in_the_way). Measured with the dress on bodies whose arms
 # were lowered with the default skeleton (for the scan, its fitted one): the sample scan
@@ -344,6 +348,7 @@ def _measure(body) -> Measurements:
 
     m.armpit_height = armpit
     m.arm_gap = _arm_gap(prof, armpit - ARM_GAP_BELOW)
+    m.arm_root = _arm_root(prof, armpit - ARM_ROOT_BELOW)
     if m.arm_gap < ARM_GAP_OK:
         m.notes.append(f"the arms hang {100 * m.arm_gap:.1f} cm from the torso {100 * ARM_GAP_BELOW:.0f} cm below "
                        f"the armpits: dresses and tops are sewn reliably from {100 * ARM_GAP_OK:.0f} cm (an "
@@ -426,12 +431,29 @@ def _arm_gap(prof: _Profile, y: float) -> float:
     return float(min(gaps)) if gaps else float("nan")
 
 
+def _arm_root(prof: _Profile, y: float) -> float:
+    """Mean convex-hull perimeter of the longest piece beside the torso on each side at height y
+    (the arms); NaN unless both are there."""
+    pieces = prof.cut(y)
+    core = prof.central_piece(pieces)
+    if core is None:
+        return float("nan")
+    sides = [[p for p in pieces if p is not core and (p.xmin > core.xmax if s > 0 else p.xmax < core.xmin)]
+             for s in (-1.0, 1.0)]
+    if not all(sides):
+        return float("nan")
+    return float(np.mean([max(ps, key=lambda p: p.length).hull_perimeter for ps in sides]))
+
+
 def _torso_girths(prof: _Profile, h: float, crotch: float, armpit: float, m: Measurements) -> None:
-    # Bust point: the most forward point of the torso in the chest region.
+    # Bust point: the most forward point of the torso in the chest region -- a peak of the front
+    # profile there, not the region's lower edge, where a belly can stand further forward
+    # (default:male at weight 1: the "bust point" was the belly, at the waist, and the bust,
+    # underbust and every size chosen from them came out n/a)
     idx = prof.index_range(armpit - 0.12 * h, armpit - 0.01 * h)
     front = np.array([prof.central[i].points[:, 1].max() if prof.central[i] is not None else -np.inf
                       for i in idx])
-    i_apex = idx[int(np.argmax(front))]
+    i_apex = idx[_front_peak(front)]
     m.bust_height = float(prof.ys[i_apex])
 
     # Waist: narrowest torso girth between the hips and the bust point.
@@ -466,6 +488,21 @@ def _torso_girths(prof: _Profile, h: float, crotch: float, armpit: float, m: Mea
             best, best_y = g, float(prof.ys[i])
     if np.isfinite(best):
         m.hips, m.hip_height = best, best_y
+
+
+BUST_PEAK_CUTS = 3  # a bust point stands at least as far forward as the cuts this far above and below
+
+
+def _front_peak(front: np.ndarray) -> int:
+    """Index of the most forward peak of a front profile (cuts bottom to top): a cut at least as
+    far forward as its BUST_PEAK_CUTS neighbours on each side, away from both ends; the most
+    forward cut when there is none."""
+    k = BUST_PEAK_CUTS
+    best = -1
+    for j in range(k, len(front) - k):
+        if front[j] >= front[j - k:j + k + 1].max() and (best < 0 or front[j] > front[best]):
+            best = j
+    return best if best >= 0 else int(np.argmax(front))
 
 
 def _leg_pair(prof: _Profile, pieces: list[Piece]) -> list[Piece] | None:

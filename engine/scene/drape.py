@@ -76,8 +76,9 @@ class DrapeOptions:
     # (ClothParams.strain_guard, if set, wins)
     too_tight: float = 0.10  # a drape whose strain exceeds the fabric's threshold by this is refused
     refuse_after: float = 2.0  # s: ... early, once it stayed so this long after drape_min. Measured
-    # (strain every 0.1 s): the sample scan's L sleeveless shirt, far too small, 25-44 % from
-    # 0.5 s to the end of its 6 s budget; a dress that ends at 6.0 % after a stuck shoulder seam
+    # (strain every 0.1 s): the sample scan's L sleeveless shirt, far too small round armholes
+    # then cut 1.6 cm shallower (ARMHOLE_PER_ARM_ROOT), 25-44 % from 0.5 s to the end of its 6 s
+    # budget; a dress that ends at 6.0 % after a stuck shoulder seam
     # was snapped (default:female,weight=1.0,height=1.45, M) spent 1.3 s at 12-32 % first -- so
     # 0.5 s refused a garment that fits
     observe_every: float = 0.02  # s of simulated time between calls of the observer, if any
