@@ -129,7 +129,8 @@ def test_a_dress_on_a_scan_with_the_arms_closer_is_sewn_with_friction(tmp_path):
     assert rep["penetration_mm"]["max"] <= 3.0 and rep["penetration_mm"]["p99"] <= 1.0, rep["penetration_mm"]
     assert rep["strain"]["max"] <= rep["strain"]["threshold"] + 0.01, rep["strain"]
     assert rep["settled"] and rep["cloth_vertices"] < rep["cloth_vertices_unsewn"]
-    assert rep["seam_gap_mm"]["max"] <= 20.0, rep["seam_gap_mm"]  # DrapeOptions.snap_gap
+    # the last shoulder pairs stall and are welded where they are (DrapeOptions.snap_gap)
+    assert rep["seam_gap_mm"]["snapped"] >= 1 and rep["seam_gap_mm"]["max"] <= 20.0, rep["seam_gap_mm"]
     assert rep["shift_mm"]["top"] > -60.0, rep["shift_mm"]  # on the shoulders (fallen: -400)
 
 
@@ -200,11 +201,12 @@ def test_sleeved_shirt_on_the_sample_scan():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("garment", ["dress", "sleeveless-shirt"])
-def test_auto_size_on_the_sample_scan(garment):
-    """--size auto on the sample scan: the girths pick L, whose bodice is too small over the
-    scan's fuller bust (measured: refused at 21-27 % strain); the next size, XL, drapes to the
-    quality bar. The CLI and the service dress through dress_in_size."""
+@pytest.mark.parametrize("garment,tried,size", [("dress", ["L"], "XL"), ("sleeveless-shirt", [], "L")])
+def test_auto_size_on_the_sample_scan(garment, tried, size):
+    """--size auto on the sample scan: the girths pick L. The L dress is too small at the
+    shoulders and underarms (measured: 23 % strain); the next size, XL, drapes to the quality
+    bar. The L sleeveless shirt fits (it was 13 % stretched round armholes that did not follow
+    the scan's thick arms). The CLI and the service dress through dress_in_size."""
     from engine.body import resolve_body
     from engine.scene.garments import dress_in_size
     from engine.scene.tryon import run_tryon
@@ -213,19 +215,20 @@ def test_auto_size_on_the_sample_scan(garment):
     _, rep = dress_in_size(garment, b, "auto", lambda spec, place, name: run_tryon(b, spec, place=place,
                                                                                  source=name))
     _check_quality(rep)
-    assert [t["size"] for t in rep["sizes_tried"]] == ["L"], rep["sizes_tried"]
-    assert rep["garment"] == f"{garment} (XL, women's chart, chosen by draping: L too small)"
+    assert [t["size"] for t in rep["sizes_tried"]] == tried, rep["sizes_tried"]
+    how = "chosen by draping: L too small" if tried else "chosen from the body's girths"
+    assert rep["garment"] == f"{garment} ({size}, women's chart, {how})"
 
 
 @pytest.mark.slow
-def test_a_stuck_shoulder_seam_is_snapped():
-    """A short heavy avatar's dress: one pair of a shoulder seam stays 1.1-1.9 cm open from
+def test_a_short_heavy_avatars_dress_closes_its_shoulder_seams():
+    """A short heavy avatar's dress: one pair of a shoulder seam stayed 1.1-1.9 cm open from
     0.3 s on (the strap pulled tight over the shoulder; the strain limit takes back the seam's
-    pull), and the whole try-on used to fail after the 4 s sewing budget, in every size. Now the
-    stalled last pairs are welded where they are (DrapeOptions.snap_gap) and the drape goes on:
-    measured, M then ends tight (12 %) and --size auto dresses L, which meets the quality bar
-    with its own shoulder pairs snapped (the report counts them; the snap shows in
-    seam_gap_mm)."""
+    pull), and the whole try-on failed after the 4 s sewing budget, in every size; the stall
+    rule (DrapeOptions.snap_gap) then welded such pairs where they were, M ended tight (12 %)
+    and --size auto dressed L. With armholes that follow its thick arms (ARMHOLE_PER_ARM_ROOT,
+    2.8 cm deeper here) every pair closes by itself in the size its girths pick. (The stall
+    rule is exercised by test_a_dress_on_a_scan_with_the_arms_closer_is_sewn_with_friction.)"""
     from engine.body import resolve_body
     from engine.scene.garments import dress_in_size
     from engine.scene.tryon import run_tryon
@@ -233,8 +236,7 @@ def test_a_stuck_shoulder_seam_is_snapped():
     b = resolve_body("default:female,weight=1.0,height=1.45")
     _, rep = dress_in_size("dress", b, "auto", lambda spec, place, name: run_tryon(b, spec, place=place,
                                                                                  source=name))
-    assert rep["seam_gap_mm"]["snapped"] >= 1 and rep["seam_gap_mm"]["max"] <= 20.0, rep["seam_gap_mm"]
-    rep["seam_gap_mm"]["max"] = min(rep["seam_gap_mm"]["max"], 10.0)  # the snap is allowed here
+    assert rep["seam_gap_mm"]["snapped"] == 0 and rep["sizes_tried"] == [], rep
     _check_quality(rep)
 
 

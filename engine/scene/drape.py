@@ -62,7 +62,9 @@ class DrapeOptions:
     snap_after: float = 2.0  # s ... is wider than snap_gap, they are welded where they are.
     # Measured (default:female,weight=1.0,height=1.45, dress M): one pair of a shoulder seam, the
     # strap pulled tight over the shoulder, stayed 1.1-1.9 cm open from 0.3 s to the 4 s budget
-    # (the strain limit takes back the seam's pull) and the whole try-on failed. Without
+    # (the strain limit takes back the seam's pull) and the whole try-on failed (its armholes
+    # now follow its thick arms and it closes; a scan with the arms 20 degrees lower still
+    # stalls at 1.3-1.6 cm and is snapped). Without
     # snap_after, 0.25 s windows snapped the sample scan's XL sleeveless shirt at 12.9 mm, which
     # closes by itself in 0.7 s
     drape_budget: float = 6.0  # s of simulated time (the sample skirt and trousers on default:male settle
