@@ -150,13 +150,15 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
 # x the fabric's friction while sewing on a body whose arms hang closer to its torso than
 # ARM_GAP_OK. Without friction the panels slide over the body into place, but there the straps
 # slid off the shoulders -- down the arm, which no longer falls away at 45 degrees -- and the
-# dress fell to the hips. Measured (dress, sleeveless shirt and shirt, --size auto, each body
-# sewn without friction before): default:female as a scan with its arms lowered 10 degrees
-# (8.7 cm) and 20 degrees (5.4 cm): all three sewed (the dresses had failed, 15 cm open; the
-# 20-degree one now ends 6 % stretched with 2 pairs snapped at 1.6 cm); at 30 degrees (2.4 cm)
-# the dress and the sleeveless shirt stayed 2.3-3.3 cm open. The sample scan lowered 10 degrees
-# (7.2 cm): the shirts sewed, the dress stayed 1.9 cm open; at 20 and 30 degrees 2-10 cm.
-# Friction for every body is worse: the sample scan's dress (11.2 cm) came out 19 % stretched
+# dress fell to the hips. Measured with friction (--size auto; before the armholes followed
+# thick arms): default:female as a scan with its arms lowered 10 degrees (8.7 cm) and 20
+# degrees (5.4 cm): the dress sewed (without friction it failed, 15 cm open; at 20 degrees it
+# ends 6 % stretched in M with 2 pairs snapped at 1.6 cm), as did the sleeveless shirt and the
+# shirt (they sew without friction too: strain 5.4-6.6 % with it, 5.6-6.1 % without); at 30
+# degrees (2.4 cm) the dress and the sleeveless shirt stayed 2.3-3.3 cm open. The sample scan
+# lowered 10 degrees (7.2 cm): the shirts sewed, the dress stayed 1.9 cm open; at 20 and 30
+# degrees 2-10 cm. Friction for every body is worse: the sample scan's dress (11.2 cm) came
+# out 19 % stretched
 ARMS_CLOSE_SEW_FRICTION = 1.0
 
 
