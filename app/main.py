@@ -33,7 +33,7 @@ from app.worker import job_dir
 WEB = Path(__file__).resolve().parents[1] / "web"
 BODY_EXT = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf", ".zip")  # .zip: OBJ frames (an animation)
 RESULT_FILES = ("scene.glb", "garment.obj", "front.png", "side.png", "back.png", "report.json", "anim.glb",
-                "strip.png", "recording.viser")
+                "strip.png", "recording.viser", "pattern.json", "pattern.svg")
 VIEWER_COOKIE = "tryon_viewer"
 
 

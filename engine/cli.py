@@ -163,7 +163,7 @@ def drape_cmd(
     front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP),
 ):
     """Dress a standing body: mesh the pattern, place it, sew, drape; write scene.glb, garment.obj,
-    front/side/back.png and report.json."""
+    front/side/back.png, report.json and the pattern dressed (pattern.json, pattern.svg)."""
 
     def go():
         from dataclasses import replace
@@ -247,6 +247,7 @@ def walk_cmd(
         from engine.scene.drape import DrapeOptions
         from engine.scene.garments import dress_in_size
         from engine.scene.tryon import run_tryon
+        from engine.scene.tryon import write_pattern
         from engine.scene.walk import WalkOptions, walk_cloth, walk_report, walking_body, write_walk_outputs
 
         wo = WalkOptions(seconds=seconds, fps=fps, reuse_maps=reuse_maps, velocity_mode=velocity_mode,
@@ -281,7 +282,7 @@ def walk_cmd(
             w = walk_cloth(walker, res, wo, texel=texel / 1000.0, tol=res.model.params.tolerance,
                            progress=update, track=track)
         full = walk_report(report, w.report)
-        for p in write_walk_outputs(out, walker, w, full):
+        for p in write_walk_outputs(out, walker, w, full) + write_pattern(out, res.spec):
             typer.echo(str(p))
         r = w.report
         typer.echo(f"{report['cloth_vertices']} cloth vertices; dressed in {report['wall_seconds']['total']:.1f} s; "

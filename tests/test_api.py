@@ -174,6 +174,10 @@ def test_tryon_runs_to_the_end(tmp_path):
         assert png.status_code == 200 and png.content[:8] == b"\x89PNG\r\n\x1a\n"
         glb = c.get(j["files"]["scene.glb"], headers=h)
         assert glb.content[:4] == b"glTF"
+        # the skirt as cut for this body (M: the default size), to download
+        spec = c.get(j["files"]["pattern.json"], headers=h).json()
+        assert set(spec["pattern"]["panels"]) == {"front", "back"} and len(spec["pattern"]["stitches"]) == 4
+        assert c.get(j["files"]["pattern.svg"], headers=h).text.startswith("<svg")
         assert c.get(f"/api/tryons/{j['id']}/files/..%2Fjobs.sqlite", headers=h).status_code == 404
 
 

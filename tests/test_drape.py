@@ -38,8 +38,13 @@ def test_drape_command_writes_everything(tmp_path):
     r = CliRunner().invoke(app, ["drape", "--body", str(SAMPLE_BODY), "--garment", str(SAMPLE_SKIRT),
                                  "--resolution", "4", "--out", str(out)])
     assert r.exit_code == 0, r.output
-    for name in ("scene.glb", "garment.obj", "front.png", "side.png", "back.png", "report.json"):
+    for name in ("scene.glb", "garment.obj", "front.png", "side.png", "back.png", "report.json", "pattern.svg"):
         assert (out / name).stat().st_size > 0, name
+    # the pattern dressed, written back out: the same GarmentCode spec
+    from engine.pattern.io import load_pattern, pattern_to_dict
+
+    assert pattern_to_dict(load_pattern(out / "pattern.json")) == pattern_to_dict(load_pattern(SAMPLE_SKIRT))
+    assert (out / "pattern.svg").read_text().startswith("<svg")
     rep = json.loads((out / "report.json").read_text())
     assert REPORT_KEYS <= set(rep)
     assert rep["iterations"] > 0 and rep["ms_per_iteration"]["total"] > 0

@@ -111,6 +111,7 @@ def test_page_dresses_the_default_avatar(server, tmp_path):
             link.click()
         glb = d.value.path()
         assert open(glb, "rb").read(4) == b"glTF"
+        assert page.locator("#pattern-svg").count() == 1  # the dress as cut for this avatar
     img = np.asarray(Image.open(tmp_path / "viewer.png").convert("RGB"))
     # both meshes are on screen: skin-coloured body pixels and blue garment pixels (viser shades
     # them, so a generous tolerance around the base colours)

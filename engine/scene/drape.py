@@ -105,6 +105,7 @@ class DrapeResult:
     strain_guard: float | None = None  # the drape's guard (threshold + this), None: off
     guard_share: float = 0.0  # share of the last settle window's steps in which the guard acted
     snapped: int = 0  # seam pairs welded by the stall rule (DrapeOptions.snap_gap)
+    spec: object = None  # the PatternSpec dressed (set by engine.scene.tryon.run_tryon)
 
 
 def _noop(stage: str, fraction: float, message: str) -> None:

@@ -109,6 +109,7 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
         map_info = {"maps": [], "bvh_triangles": int(len(body.faces))}
     t_maps = time.perf_counter() - t0
     res = sew_and_drape(garment, collider, o, progress, observer=observer)
+    res.spec = spec
     bvh = MeshBVH(body.vertices, body.faces)
     pen = penetration_stats(body.vertices, body.faces, res.positions, bvh=bvh)
     iters = res.iterations["sewing"] + res.iterations["draping"]
@@ -217,8 +218,21 @@ def hang_warnings(shift: dict[str, float]) -> list[str]:
     return out
 
 
+def write_pattern(out: Path, spec: PatternSpec | None) -> list[Path]:
+    """pattern.json (the GarmentCode specification dressed: a catalogue garment as cut for this
+    body and size) and pattern.svg (its panels, stitched edges in pairs) in `out`."""
+    from engine.pattern.io import pattern_to_svg, save_pattern
+
+    if spec is None:
+        return []
+    out.mkdir(parents=True, exist_ok=True)
+    svg = out / "pattern.svg"
+    svg.write_text(pattern_to_svg(spec))
+    return [save_pattern(spec, out / "pattern.json"), svg]
+
+
 def write_outputs(out: Path, body: Body, res: DrapeResult, report: dict, size: int = 700) -> list[Path]:
-    """scene.glb, garment.obj, front/side/back.png, report.json in `out`."""
+    """scene.glb, garment.obj, front/side/back.png, report.json, pattern.json/.svg in `out`."""
     from PIL import Image
 
     from engine.io.export import write_obj, write_scene_glb
@@ -235,4 +249,4 @@ def write_outputs(out: Path, body: Body, res: DrapeResult, report: dict, size: i
     p = out / "report.json"
     p.write_text(json.dumps(report, indent=2))
     paths.append(p)
-    return paths
+    return paths + write_pattern(out, res.spec)
