@@ -135,7 +135,7 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
     """Walk `body` wearing the draped garment `drape` for options.seconds. observer: called
     every frame (engine.scene.drape.Observer, with the body's vertices of the frame; both
     meshes relative to the root's horizontal travel, so that a viewer keeps the walker in view)."""
-    from engine.collide.bvh import MeshBVH
+    from engine.collide.bvh import MeshBVH, penetration_depth
     from engine.collide.maps import MapRenderer
     from engine.collide.moving import TrackCollider
 
@@ -219,8 +219,7 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
                 exact = MeshBVH(bv, body.faces)
             else:
                 exact.update(bv)  # same topology: refit
-            sd = exact.signed_distance(x)  # exact, against this frame's mesh
-            depth = np.where(sd < 0.0, -sd, 0.0)
+            depth, _ = penetration_depth(exact, x)  # exact, against this frame's mesh
             depths.append(depth.astype(np.float32))
             t_pen += time.perf_counter() - tp
             per_frame.append({"frame": i, "t": round(i / track.fps, 4),
