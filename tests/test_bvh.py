@@ -289,8 +289,8 @@ def test_penetration_stats():
 
 
 def test_penetration_is_not_fooled_by_a_fold_turned_inside_out():
-    """A walking scan's skin can fold inside out where two limbs' weights mix (the sample scan's
-    inner knees): the pseudonormal sign then puts points in the air near the fold "inside"
+    """A walking scan's skin can fold inside out (behind the sample scan's bent knees, its
+    weights fitted from the default body): the pseudonormal sign then puts points in the air "inside"
     (measured: 46-98 mm deep, 5-8 cm from any body vertex; 0 by winding number and by ray
     parity). Here a small box with its faces reversed beside a sphere: points just outside it
     read inside to the sign, and penetration_stats counts them outside by winding number; the

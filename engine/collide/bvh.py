@@ -776,8 +776,8 @@ WINDING_CHECK = 256  # penetration_depth asks at most this many points again by 
 def penetration_depth(bvh: MeshBVH, points) -> tuple[np.ndarray, int]:
     """(depth (N,) metres inside the body, 0 outside; how many points the sign put inside and
     the winding number outside). The pseudonormal sign needs a cleanly closed surface; a
-    walking body's skin can fold inside out where two limbs' weights mix (measured: the sample
-    scan's inner knees in the skirt's walk), and points 5-8 cm away from it read 46-98 mm
+    walking body's skin can fold inside out (measured: behind the sample scan's bent knees, its
+    weights fitted from the default body, in the skirt's walk), and points 5-8 cm away read 46-98 mm
     "inside" (0 by winding number and by ray parity). The points that read inside (the deepest
     WINDING_CHECK of them) are asked again by winding number, which a fold does not fool."""
     pts = np.asarray(points, dtype=np.float64)
