@@ -295,7 +295,7 @@ def test_penetration_is_not_fooled_by_a_fold_turned_inside_out():
     parity). Here a small box with its faces reversed beside a sphere: points just outside it
     read inside to the sign, and penetration_stats counts them outside by winding number; the
     points really inside the sphere still count."""
-    from engine.collide.bvh import winding_number
+    from engine.collide.bvh import WINDING_CHECK, winding_numbers
 
     r = 0.3
     v, f = _sphere(r, 4)
@@ -304,19 +304,18 @@ def test_penetration_is_not_fooled_by_a_fold_turned_inside_out():
     v2 = np.vstack([v, bv])
     f2 = np.vstack([f, bf[:, ::-1] + len(v)])                  # the box inside out
     rng = np.random.default_rng(3)
-    dirs = rng.normal(size=(200, 3))
+    dirs = rng.normal(size=(WINDING_CHECK - 10, 3))  # all asked again (the deepest WINDING_CHECK are)
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     near_box = np.array([0.6, 0.0, 0.0]) + dirs * 0.09         # outside the box, 4+ cm from it
+    m = len(near_box)
     inside = dirs[:5] * (r - 0.01)                              # 1 cm inside the sphere
     pts = np.vstack([near_box, inside])
     sd = MeshBVH(v2, f2).signed_distance(pts)
-    assert (sd[:200] < 0).sum() > 150                           # the sign is fooled
+    assert (sd[:m] < 0).sum() > 0.7 * m                         # the sign is fooled
     st = penetration_stats(v2, f2, pts)
-    assert st["count_inside"] == 5 and st["outside_by_winding"] == int((sd[:200] < 0).sum())
+    assert st["count_inside"] == 5 and st["outside_by_winding"] == int((sd[:m] < 0).sum())
     assert abs(st["max"] - 0.01) < 1e-3
-    tri = v2[f2]
-    w_ref = _winding(pts, tri)
-    np.testing.assert_allclose([winding_number(tri, p) for p in pts], w_ref, atol=1e-9)
+    np.testing.assert_allclose(winding_numbers(v2, f2, pts), _winding(pts, v2[f2]), atol=1e-9)
 
 
 def test_bad_input():
