@@ -246,8 +246,7 @@ def walk_cmd(
         from engine.body.motion import WalkParams
         from engine.scene.drape import DrapeOptions
         from engine.scene.garments import dress_in_size
-        from engine.scene.tryon import run_tryon
-        from engine.scene.tryon import write_pattern
+        from engine.scene.tryon import run_tryon, write_pattern
         from engine.scene.walk import WalkOptions, walk_cloth, walk_report, walking_body, write_walk_outputs
 
         wo = WalkOptions(seconds=seconds, fps=fps, reuse_maps=reuse_maps, velocity_mode=velocity_mode,

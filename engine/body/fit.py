@@ -136,9 +136,10 @@ def fit_rig(scan: Body, preset: str = "female") -> Body:
         straight[f"lowerarm01.{side}"] = d_up.T @ _rotation_between(fore, dirs[side]) @ d_up
     dirs_t = scan_arm_directions(tmpl, measure(tmpl))
     turned = {f"upperarm01.{side}": _rotation_between(dirs_t[side], dirs[side]) for side in ("L", "R")}
+    c_s = _torso_centre(scan.vertices, scan.faces, ms)
     best = None
     for deltas in (straight, turned):
-        tv, joints = _mapped_template(tmpl, deltas, ms, scan)
+        tv, joints = _mapped_template(tmpl, deltas, ms, c_s)
         # 4. weights and segments from the nearest mapped template vertex
         dist, near = cKDTree(tv).query(scan.vertices)
         if best is None or np.percentile(dist, 95) < np.percentile(best[0], 95):
@@ -153,9 +154,10 @@ def fit_rig(scan: Body, preset: str = "female") -> Body:
                 rig=new_rig, notes=notes, to_world=scan.to_world)
 
 
-def _mapped_template(tmpl: Body, deltas: dict, ms, scan: Body):
-    """The template posed with `deltas` (joint name -> rotation) and mapped onto the scan
-    (step 3 of the module doc): (mapped vertices, mapped joint transforms)."""
+def _mapped_template(tmpl: Body, deltas: dict, ms, c_s: np.ndarray):
+    """The template posed with `deltas` (joint name -> rotation) and mapped onto the scan of
+    measurements ms and torso centre c_s (step 3 of the module doc): (mapped vertices, mapped
+    joint transforms)."""
     from engine.body.measure import measure
 
     rig = tmpl.rig
@@ -171,7 +173,6 @@ def _mapped_template(tmpl: Body, deltas: dict, ms, scan: Body):
     # behind z = 0, every vertex mapped that far off -- median 42 mm -- and the walk tore the
     # arms, whose vertices took the torso's weights)
     c_t = _torso_centre(posed, tmpl.faces, mt)
-    c_s = _torso_centre(scan.vertices, scan.faces, ms)
 
     def mapped(p):
         q = np.empty_like(p)

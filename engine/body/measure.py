@@ -422,13 +422,18 @@ def _arm_gap(prof: _Profile, y: float) -> float:
     below = prof.central_piece(prof.cut(y - 0.02))
     merged = below is not None and (core.xmax - core.xmin) > 1.25 * (below.xmax - below.xmin)
     gaps = []
-    for side in (-1.0, 1.0):
-        arms = [p for p in pieces if p is not core and (p.xmin > core.xmax if side > 0 else p.xmax < core.xmin)]
+    for side, arms in zip((-1.0, 1.0), _beside(pieces, core)):
         if arms:
             gaps.append(min((p.xmin - core.xmax) if side > 0 else (core.xmin - p.xmax) for p in arms))
         elif merged:
             gaps.append(0.0)
     return float(min(gaps)) if gaps else float("nan")
+
+
+def _beside(pieces: list[Piece], core: Piece) -> list[list[Piece]]:
+    """The pieces wholly left (-x) and wholly right (+x) of the torso's piece `core`."""
+    return [[p for p in pieces if p is not core and (p.xmin > core.xmax if s > 0 else p.xmax < core.xmin)]
+            for s in (-1.0, 1.0)]
 
 
 def _arm_root(prof: _Profile, y: float) -> float:
@@ -438,8 +443,7 @@ def _arm_root(prof: _Profile, y: float) -> float:
     core = prof.central_piece(pieces)
     if core is None:
         return float("nan")
-    sides = [[p for p in pieces if p is not core and (p.xmin > core.xmax if s > 0 else p.xmax < core.xmin)]
-             for s in (-1.0, 1.0)]
+    sides = _beside(pieces, core)
     if not all(sides):
         return float("nan")
     return float(np.mean([max(ps, key=lambda p: p.length).hull_perimeter for ps in sides]))

@@ -771,7 +771,7 @@ def penetration_stats(body_vertices, body_faces, points, bvh: MeshBVH | None = N
 
 
 WINDING_CHECK = 64  # penetration_depth asks at most this many points again by winding number
-# (about 1 ms a point on a 47k-triangle scan; the max and the deepest points are what matter)
+# (about 2 ms a point on a 47k-triangle scan; the max and the deepest points are what matter)
 
 
 def penetration_depth(bvh: MeshBVH, points) -> tuple[np.ndarray, int]:
