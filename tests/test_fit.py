@@ -18,9 +18,9 @@ def test_the_default_body_as_a_scan_gets_its_own_rig_back(tmp_path, degrees):
     """default:female (arms as built, or lowered 20 degrees with its own skeleton) saved as an
     OBJ and loaded as a scan: same vertices, same order, so the fitted labels and weights can
     be compared one to one. Before, the template was mapped 8.7 cm behind the scan (a scan is
-    centred on its bounding box, which the hands pull forward) and its arms turned 8 degrees
-    off: median 42 mm from the scan, 95 % 120-189 mm, and a walk tore the arms apart (their
-    vertices took torso weights; penetration 44 mm)."""
+    centred on its bounding box, which the hands pull forward) and its upper arms turned 34
+    degrees onto their surface's axis: median 42 mm from the scan, 95 % 120-189 mm, and a walk
+    tore the arms apart (their vertices took torso weights; penetration 44 mm)."""
     a_pose = resolve_body("default:female")
     scan = load_body_file(write_arms_lowered_scan(tmp_path / "me.obj", degrees))
     assert scan.rig is None and scan.segments is None
