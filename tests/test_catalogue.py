@@ -70,14 +70,16 @@ def test_placement_keeps_panels_near_their_flat_lengths(body, garment, worst, p9
     assert np.percentile(strain, 99) < p99
 
 
-@pytest.mark.parametrize("garment", ["dress", "sleeveless-shirt", "shirt"])
+@pytest.mark.parametrize("garment", ["dress", "sleeveless-shirt"])
 def test_straps_lean_in_over_the_shoulders(body, garment):
-    """Above the armholes a top's rows lean in toward the upper chest and the shoulder blades
+    """Above the armholes a sleeveless top's rows lean in toward the upper chest and the shoulder blades
     (wrap_torso, _lean_in): standing straight up from the bust, the shoulder seams' ends
     started 31-36 cm apart across the shoulders, and the seam pull swung the straps down
     about their base (the dress M fell off default:female at 3 of 8 cloth resolutions).
-    Measured at M: 31-36 cm apart, 5-12 cm off the body; leaning, 19-20 cm apart, 1.3-6.4 cm
-    off (not in it). The placed panels' strain is tested above."""
+    Measured at M: 31-34 cm apart, 5-12 cm off the body; leaning, 19 cm apart, 1.3-5.7 cm off
+    (not in it). The placed panels' strain is tested above. (The shirt's shoulders, held by its
+    sleeve caps, stand as before: it sewed at every resolution, and leaning, the sample scan's
+    L ended with one spring at the shoulder 6.5 % stretched, not 5.9 %.)"""
     from engine.collide.bvh import MeshBVH
     from engine.garment.garment import build_garment
 
@@ -92,7 +94,7 @@ def test_straps_lean_in_over_the_shoulders(body, garment):
         gap = np.linalg.norm(g.positions[pairs[:, 0]] - g.positions[pairs[:, 1]], axis=1)
         assert gap.max() < 0.21, f"{g.stitch_names[k]} starts {100 * gap.max():.0f} cm open"
         d = bvh.signed_distance(g.positions[pairs.ravel()])
-        assert d.min() > 0.0 and d.max() < 0.07, f"{g.stitch_names[k]}: {100 * d.min():.1f}-{100 * d.max():.1f} cm off"
+        assert d.min() > 0.0 and d.max() < 0.06, f"{g.stitch_names[k]}: {100 * d.min():.1f}-{100 * d.max():.1f} cm off"
 
 
 def test_size_chart_follows_the_body_not_its_file_name(tmp_path):

@@ -119,12 +119,14 @@ def _half_perimeter(a: float, b: float) -> float:
 
 
 def wrap_torso(uv: np.ndarray, hint: PanelHint, sections: BodySections, top_y: float,
-               outline: np.ndarray, widen_to: float | None = None, clamp_y: float | None = None) -> np.ndarray:
+               outline: np.ndarray, widen_to: float | None = None, clamp_y: float | None = None,
+               lean: bool = True) -> np.ndarray:
     """(n, 2) panel points (metres; v = 0 at the panel's top, u = 0 on its centre line) ->
     (n, 3) world points on the front (hint.side == 'front') or back of the body.
     outline: (M, 2) the panel's outline, for its width at each height; clamp_y: above this
     height use the cross-section at it (a top's shoulder straps go over the shoulders, not
-    around the neck).
+    around the neck); lean: the rows above clamp_y lean in over the shoulders (_lean_in; a
+    sleeved top's shoulders are held by its sleeve caps and stand straight up).
     The ellipses are found every ROW of the panel's height and a point lies between the two
     nearest (linear in height). A panel point keeps its height, so where the ellipse changes
     fast with height a vertical line of the panel is stretched: the body's own profile (under
@@ -186,15 +188,16 @@ def wrap_torso(uv: np.ndarray, hint: PanelHint, sections: BodySections, top_y: f
         move = np.zeros(len(rows))
         np.maximum.at(move, r_up, gap)
         move = _limit_slope(move, RISE_SLOPE * ROW)
-        # ... and rows further off than that lean in (_lean_in), each point lowered so that its
-        # vertical line keeps its length
-        lean = _lean_in(move[r_up] - gap, facing[up], r_up, top_y + rows * ROW > clamp_y)
-        step = facing[:, None] * np.diff(lean)[None, :]
-        drop = np.concatenate([np.zeros((len(uv), 1)),
-                               np.cumsum(ROW - np.sqrt(np.maximum(ROW * ROW - step * step, 0.0)), axis=1)], axis=1)
-        k = np.arange(len(uv))
-        out[:, 1] -= (1.0 - w) * drop[k, j0] + w * drop[k, j0 + 1]
-        out[:, 2] -= sign * facing * ((1.0 - w) * lean[j0] + w * lean[j0 + 1])
+        if lean:
+            # ... and rows further off than that lean in (_lean_in), each point lowered so that
+            # its vertical line keeps its length
+            rows_lean = _lean_in(move[r_up] - gap, facing[up], r_up, top_y + rows * ROW > clamp_y)
+            step = facing[:, None] * np.diff(rows_lean)[None, :]
+            drop = np.concatenate([np.zeros((len(uv), 1)), np.cumsum(
+                ROW - np.sqrt(np.maximum(ROW * ROW - step * step, 0.0)), axis=1)], axis=1)
+            k = np.arange(len(uv))
+            out[:, 1] -= (1.0 - w) * drop[k, j0] + w * drop[k, j0 + 1]
+            out[:, 2] -= sign * facing * ((1.0 - w) * rows_lean[j0] + w * rows_lean[j0 + 1])
         out[:, 2] += sign * ((1.0 - w) * move[j0] + w * move[j0 + 1])
     return out
 
@@ -208,11 +211,11 @@ def _lean_in(room: np.ndarray, facing: np.ndarray, row: np.ndarray, above: np.nd
     stands CLEARANCE off the body (room: how far each point may move in, +inf where no body is
     under it, then as the row below), by at most LEAN_SLOPE per metre of panel height more
     than the row below. Returns the rows' leans (R,).
-    Why: standing straight up from the bust, the straps of a top started 31-36 cm apart across
-    the shoulders (the default bodies' tops in M); the seam pull swung them about their base,
-    down below the shoulders, and default:female's dress slid off sideways at 3 of 8 cloth
-    resolutions from 1.1 to 1.8 cm. Leaning, they start 19-20 cm apart and every resolution
-    sews, in 20-35 % fewer iterations. A steeper lean leaves diagonal springs at the neckline
+    Why: standing straight up from the bust, the straps of a sleeveless top started 31-34 cm
+    apart across the shoulders (the default bodies' dress and sleeveless shirt in M); the seam
+    pull swung them about their base, down below the shoulders, and default:female's dress
+    slid off sideways at 3 of 8 cloth resolutions from 1.1 to 1.8 cm. Leaning, they start
+    19 cm apart and every resolution sews, in 20-35 % fewer iterations. A steeper lean leaves diagonal springs at the neckline
     stretched (measured, placed dress and sleeveless shirt on both bodies, structural springs'
     p99: 13.6-17.5 % at 0.8 per metre; 10.5-14.8 % at 0.65; 6.8-13.2 % before)."""
     limit = np.full(len(above), np.inf)

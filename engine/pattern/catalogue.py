@@ -565,7 +565,8 @@ def make_garment(name: str, body: Body, size: str = "M"):
         if pname in special:
             return special[pname](uv)
         hint = made.hints[pname]
-        return wrap_torso(uv, hint, sections, made.tops[pname] / 100.0, outlines[pname], clamp_y=made.clamp_y)
+        return wrap_torso(uv, hint, sections, made.tops[pname] / 100.0, outlines[pname], clamp_y=made.clamp_y,
+                          lean=not made.sleeve_axes)
 
     how = ", chosen from the body's girths" if chosen else ""
     return made.spec, place, f"{name} ({size}, {'men' if fit.men else 'women'}'s chart{how})"
