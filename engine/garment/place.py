@@ -215,9 +215,10 @@ def _lean_in(room: np.ndarray, facing: np.ndarray, row: np.ndarray, above: np.nd
     apart across the shoulders (the default bodies' dress and sleeveless shirt in M); the seam
     pull swung them about their base, down below the shoulders, and default:female's dress
     slid off sideways at 3 of 8 cloth resolutions from 1.1 to 1.8 cm. Leaning, they start
-    19 cm apart and every resolution sews, in 28-36 % fewer iterations. A steeper lean leaves diagonal springs at the neckline
-    stretched (measured, placed dress and sleeveless shirt on both bodies, structural springs'
-    p99: 13.6-17.5 % at 0.8 per metre; 10.5-14.8 % at 0.65; 6.8-13.2 % before)."""
+    19 cm apart and every resolution sews, in 28-36 % fewer iterations. A steeper lean leaves
+    diagonal springs at the neckline stretched (measured, placed dress and sleeveless shirt on
+    both bodies, structural springs' p99: 13.6-17.5 % at 0.8 per metre; 10.5-14.8 % at 0.65;
+    6.8-13.2 % before)."""
     limit = np.full(len(above), np.inf)
     np.minimum.at(limit, row, room / np.maximum(facing, 0.05))
     limit[~above] = 0.0
