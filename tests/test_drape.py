@@ -118,11 +118,12 @@ def test_a_dress_sews_at_other_cloth_resolutions(edge):
 @pytest.mark.slow
 def test_a_garment_far_too_small_is_refused():
     """The sample scan's XS sleeveless shirt (chart bust 82 cm on a 97.5 cm bust): its side
-    seams cannot close (2.1-2.3 cm open after the 4 s sewing budget, 25 s of wall time): a clear
-    error that says it may be too small, with a picture's positions, marked too_small (for
-    --size auto and the size hint). (Before the straps leaned over the shoulders its seams
-    closed and the drape refused it as stretched at least 16 %; the rule that does that is
-    tested below.)"""
+    seams cannot close. Sewing gives up once they stopped closing, more than snap_gap open,
+    after snap_after (2.0 s of simulated time, 15 s of wall time; at the 4 s budget they were
+    still 2.1-2.3 cm open, 25 s): a clear error that says it may be too small, with a picture's
+    positions, marked too_small (for --size auto and the size hint). (Before the straps leaned
+    over the shoulders its seams closed and the drape refused it as stretched at least 16 %;
+    the rule that does that is tested below.)"""
     from engine.body import resolve_body
     from engine.errors import SimulationError
     from engine.scene.garments import resolve_garment
@@ -130,8 +131,29 @@ def test_a_garment_far_too_small_is_refused():
 
     body = resolve_body(str(SAMPLE_BODY))
     spec, place, name = resolve_garment("sleeveless-shirt", body, "XS")
-    with pytest.raises(SimulationError, match=r"may be too small for this body \(try a larger size\)") as e:
+    with pytest.raises(SimulationError, match=r"sewing stopped closing after 2.0 s of simulated time \(the widest "
+                                              r"gap stayed .* open seams: .* may be too small for this body "
+                                              r"\(try a larger size\)") as e:
         run_tryon(body, spec, place=place, source=name)
+    assert e.value.too_small and e.value.positions.shape[1] == 3
+
+
+def test_sewing_gives_up_when_the_seams_stop_closing():
+    """A skirt far too small for the body (XS on default:male, coarse cloth): its side seams stop
+    closing 3-5 cm apart; sewing gives up after snap_after (2 s of simulated time), not at the
+    end of the 4 s budget, and says how far they stayed open and that the garment may be too
+    small."""
+    from engine.body.default import default_body
+    from engine.errors import SimulationError
+    from engine.scene.garments import resolve_garment
+    from engine.scene.tryon import run_tryon
+
+    body = default_body("male")
+    spec, place, name = resolve_garment("skirt", body, "XS")
+    with pytest.raises(SimulationError, match=r"^sewing stopped closing after 2.0 s of simulated time \(the widest "
+                                              r"gap stayed \d+.\d-\d+.\d cm for 0.5 s\); open seams: front\[1\]-back\[4\] "
+                                              r"\(\d+.\d cm\)\. The garment may be too small") as e:
+        run_tryon(body, spec, h=0.03, place=place, source=name)
     assert e.value.too_small and e.value.positions.shape[1] == 3
 
 
