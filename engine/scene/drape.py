@@ -170,16 +170,17 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
                 if len(stall) == stall.maxlen and it >= snap_from:
                     h = len(stall) // 2
                     older, recent = list(stall)[:h], list(stall)[h:]
+                    stalled = min(older) - min(recent) < 0.001
                     # (the median: a stalled strap pair on a scan swayed 1.5-2.5 cm for the
                     # whole budget, and the largest never stayed under snap_gap)
-                    if g <= o.snap_gap and np.median(recent) <= o.snap_gap and min(older) - min(recent) < 0.001:
+                    if stalled and g <= o.snap_gap and np.median(recent) <= o.snap_gap:
                         # stuck: weld the last open pairs where they are (the drape relaxes the
                         # stretch); the snap shows in seam_gap_mm, the count in seam_gap_mm.snapped
                         snapped = int((~welded).sum())
                         gap_max = max(gap_max, g)
                         welded[:] = True
                         break
-                    if min(recent) > o.snap_gap and min(older) - min(recent) < 0.001:
+                    if stalled and min(recent) > o.snap_gap:
                         gave_up = ((it + 1) * dt, min(recent), max(recent))
                         break
                 progress("sewing", min(1.0, 1.0 - g / max(gap0, 1e-9)), f"largest open seam gap {g * 100:.1f} cm")
