@@ -109,6 +109,7 @@ class DrapeResult:
     guard_share: float = 0.0  # share of the last settle window's steps in which the guard acted
     snapped: int = 0  # seam pairs welded by the stall rule (DrapeOptions.snap_gap)
     spec: object = None  # the PatternSpec dressed (set by engine.scene.tryon.run_tryon)
+    lowering: dict | None = None  # dressed with the arms raised: the lowering's figures (engine.scene.arms)
 
 
 def _noop(stage: str, fraction: float, message: str) -> None:
@@ -217,11 +218,35 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
         solver = ClothSolver(model, collider, dt=o.dt, force_dt=o.force_dt)
         dt = solver.dt
     timing["sewing"] = time.perf_counter() - t0
+    res = drape(model, state, collider, o, progress, observer, gravity_from=g_sewn, solver=solver)
+    timing["draping"] = res.timing["draping"]
+    for k in cloth_t:
+        cloth_t[k] += res.timing[f"{k}_total"]
+    res.iterations = {"sewing": iters["sewing"], "draping": res.iterations["draping"]}
+    res.timing = {**timing, **{f"{k}_total": v for k, v in cloth_t.items()}}
+    res.seam_gap_max, res.snapped = gap_max, snapped
+    return res
 
-    # --- drape ---
+
+def drape(model: ClothModel, state: ClothState, collider: Collider | None, options: DrapeOptions | None = None,
+          progress: Progress = _noop, observer: Observer | None = None, gravity_from: float = 1.0,
+          solver: ClothSolver | None = None) -> DrapeResult:
+    """The drape stage alone (module doc), from `state` (changed in place) of the sewn `model`:
+    until the shape stops moving, or the budget ends; a garment left stretched past the fabric's
+    threshold + too_tight is refused. Gravity grows from `gravity_from` x g over the rest of the
+    ramp. `solver` (of this model and collider) carries its iteration count and timing on.
+    The result's seam fields are zero (no seams are open in a sewn model)."""
+    o = options or DrapeOptions()
+    fabric = get_fabric(o.fabric)
+    if solver is None:
+        solver = ClothSolver(model, collider, dt=o.dt, force_dt=o.force_dt)
+    dt = solver.dt
     t0 = time.perf_counter()
+    it0 = solver.iterations
+    timing0 = dict(solver.timing)
     if o.params.strain_guard is None:
         solver.strain_guard = o.strain_guard
+    solver.recover = o.params.recover
     budget = int(np.ceil(o.drape_budget / dt))
     min_it = int(np.ceil(o.drape_min / dt))
     # the settle test runs every 1/SETTLE_CHECKS of a window, on the two windows just ended
@@ -238,7 +263,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
     drift, guard_steps, guard_share = np.inf, 0, 0.0
     for it in range(budget):
         # gravity goes on growing from where sewing left it (no second ramp from zero)
-        solver.step(state, gravity_scale=min(1.0, g_sewn + (it + 1) * dt / o.gravity_ramp),
+        solver.step(state, gravity_scale=min(1.0, gravity_from + (it + 1) * dt / o.gravity_ramp),
                     damping_scale=o.drape_damping)
         guard_steps += solver.guarded > 0
         if observer is not None and it % observe == 0:
@@ -267,18 +292,16 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
                 if max(older, drift) < o.settle_speed and it >= min_it:
                     settled = True
                     break
-    iters["draping"] = solver.iterations
-    timing["draping"] = time.perf_counter() - t0
     strain = solver.max_strain(state)
     if strain > refuse:
         raise _too_small(state, model, strain, fabric, "after draping it is stretched")
-    for k in cloth_t:
-        cloth_t[k] += solver.timing[k]
     return DrapeResult(positions=state.x.copy(), triangles=_triangles(model), model=model, state=state,
-                       iterations=iters, timing={**timing, **{f"{k}_total": v for k, v in cloth_t.items()}},
-                       seam_gap_max=gap_max, settled=settled, kinetic_energy=solver.kinetic_energy(state),
+                       iterations={"draping": solver.iterations - it0},
+                       timing={"draping": time.perf_counter() - t0,
+                               **{f"{k}_total": solver.timing[k] - timing0.get(k, 0.0) for k in solver.timing}},
+                       seam_gap_max=0.0, settled=settled, kinetic_energy=solver.kinetic_energy(state),
                        strain_max=strain, dt=dt, strain_guard=solver.strain_guard,
-                       guard_share=guard_share, snapped=snapped)
+                       guard_share=guard_share, snapped=0)
 
 
 def _edge(g: Garment) -> float:
