@@ -11,10 +11,12 @@
    widths and depths scaled by the ratio of the circumferences at the nearest landmark (hips,
    waist, bust; the legs take the hips', the head none).
 4. Joints: the template's posed joints, mapped the same way. Weights and segment labels: each
-   scan vertex takes those of the nearest mapped template vertex.
+   scan vertex takes those of the nearest mapped template vertex whose normal faces the same way
+   (so a torso side under an arm hanging close to it does not take the arm's).
 
-Limits: a scan in a very different pose (arms down at the sides, crossed legs) gets wrong weights
-where limbs touch; the scan must be normalised (Y up, facing +Z, feet on y = 0: engine.body.load).
+Limits: a scan in a very different pose (crossed legs, arms touching the torso) gets wrong
+weights where limbs touch; the scan must be normalised (Y up, facing +Z, feet on y = 0:
+engine.body.load).
 """
 
 from __future__ import annotations
@@ -141,11 +143,13 @@ def fit_rig(scan: Body, preset: str = "female") -> Body:
     best = None
     for deltas in (straight, turned):
         tv, joints = _mapped_template(tmpl, deltas, ms, c_s)
-        # 4. weights and segments from the nearest mapped template vertex
-        dist, near = cKDTree(tv).query(scan.vertices)
+        tree = cKDTree(tv)
+        dist, _ = tree.query(scan.vertices)
         if best is None or np.percentile(dist, 95) < np.percentile(best[0], 95):
-            best = (dist, near, joints)
-    dist, near, joints = best
+            best = (dist, tv, tree, joints)
+    _, tv, tree, joints = best
+    # 4. weights and segments from the nearest mapped template vertex facing the same way
+    dist, near = _nearest_facing(tv, tmpl.faces, scan, tree)
     new_rig = Rig(joint_names=list(rig.joint_names), parents=rig.parents.copy(), rest_transforms=joints,
                   skin_indices=rig.skin_indices[near].copy(), skin_weights=rig.skin_weights[near].copy())
     notes = list(scan.notes) + [f"skeleton and weights fitted from the default {preset} body "
@@ -153,6 +157,25 @@ def fit_rig(scan: Body, preset: str = "female") -> Body:
                                 f"95 % {np.percentile(dist, 95) * 1000:.0f} mm)"]
     return Body(vertices=scan.vertices, faces=scan.faces, name=scan.name, segments=tmpl.segments[near].copy(),
                 rig=new_rig, notes=notes, to_world=scan.to_world)
+
+
+NEAREST_K = 16  # candidates for the nearest template vertex facing the same way
+FACING = 0.0  # ... whose normal's dot product with the scan vertex's normal exceeds this
+
+
+def _nearest_facing(tv: np.ndarray, tf: np.ndarray, scan: Body, tree) -> tuple[np.ndarray, np.ndarray]:
+    """(distance, index) of the nearest of the NEAREST_K nearest mapped template vertices whose
+    normal faces the same way as the scan vertex's (dot > FACING); the nearest where none does.
+    Where an arm hangs close to the torso, the nearest template vertex of a torso side under the
+    armpit can be on the inner arm: measured on default:female as a scan with its arms lowered 30
+    degrees (2.4 cm from the torso), the torso side then took upper-arm weights, and raising
+    the arms pulled it out into flaps."""
+    dist, near = tree.query(scan.vertices, k=NEAREST_K)
+    tn = Body(tv, tf).vertex_normals()
+    agree = np.einsum("nkc,nc->nk", tn[near], scan.vertex_normals()) > FACING
+    first = np.where(agree.any(axis=1), agree.argmax(axis=1), 0)
+    rows = np.arange(len(near))
+    return dist[rows, first], near[rows, first]
 
 
 def _mapped_template(tmpl: Body, deltas: dict, ms, c_s: np.ndarray):
