@@ -64,6 +64,7 @@ class WalkOptions:
     # strain max 11.9 %, penetration max 3.4 mm, 134 ms a frame; with 0.02: 7.1 %, 2.2 mm, 137 ms.
     strain_guard: float | None = 0.02
     collision: str = "image"  # or "object": the BVH baseline (engine.collide.moving.TrackObjectCollider)
+    friction: float = 1.0  # x the fabric's cloth-body friction (engine.scene.arms lowers arms without it)
 
     def validate(self) -> None:
         if not (0.1 <= self.seconds <= 60.0):
@@ -78,6 +79,8 @@ class WalkOptions:
             raise InputError(f"contact_rounds {self.contact_rounds}: use 1 .. 16")
         if not (1 <= self.collide_every <= 16):
             raise InputError(f"collide_every {self.collide_every}: check collisions every 1 .. 16 steps")
+        if not (0.0 <= self.friction <= 2.0):
+            raise InputError(f"friction scale {self.friction}: use 0 .. 2")
         if not (5.0 <= self.fps <= 120.0):
             raise InputError(f"--fps {self.fps}: use 5 .. 120 frames per second")
         self.walk.validate()
@@ -196,7 +199,7 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
             m0, c0, k0 = collider.stats["map_seconds"], solver.timing["cloth"], solver.timing["collision"]
             for s in range(sub):
                 collider.set_time((i - 1 + (s + 1) / sub) * frame_time)
-                solver.step(state)
+                solver.step(state, friction_scale=o.friction)
             t_maps += collider.stats["map_seconds"] - m0
             t_cloth += solver.timing["cloth"] - c0
             t_coll += solver.timing["collision"] - k0
