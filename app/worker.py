@@ -114,11 +114,11 @@ def _simulate(req, body, g, fabric, walking, out, progress, view, track=None) ->
 
     retry = [""]  # while --size auto dresses a larger size, every progress message says why
 
-    def dress(spec, place, name):
+    def dress(spec, place, name, **kw):
         return run_tryon(body, spec, fabric=fabric, h=req.get("resolution_cm", 1.5) / 100.0,
                          options=DrapeOptions(fabric=fabric), place=place,
                          source=name if "name" in g else g.get("label", name),
-                         progress=lambda stage, f, msg: progress(stage, f, retry[0] + msg), observer=view)
+                         progress=lambda stage, f, msg: progress(stage, f, retry[0] + msg), observer=view, **kw)
 
     def note(size, why, larger):
         retry[0] = f"size {size} came out too small, trying {larger} -- "

@@ -180,9 +180,9 @@ def drape_cmd(
                             params=params)
         prog, update = _progress_printer()
 
-        def dress(spec, place, name):
+        def dress(spec, place, name, **kw):
             return run_tryon(b, spec, fabric=fabric, h=resolution / 100.0, texel=texel / 1000.0,
-                             collision=collision, options=opts, place=place, source=name, progress=update)
+                             collision=collision, options=opts, place=place, source=name, progress=update, **kw)
 
         with prog:
             try:
@@ -270,10 +270,10 @@ def walk_cmd(
             typer.echo(f"note: {walker.notes[-1]}", err=True)
         prog, update = _progress_printer()
 
-        def dress(spec, place, name):
+        def dress(spec, place, name, **kw):
             return run_tryon(b, spec, fabric=fabric, h=resolution / 100.0, texel=texel / 1000.0,
                              collision=collision, options=DrapeOptions(fabric=fabric), place=place,
-                             source=name, progress=update)
+                             source=name, progress=update, **kw)
 
         with prog:
             res, report = dress_in_size(garment, b, size, dress, note=_size_note)

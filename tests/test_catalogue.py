@@ -252,13 +252,15 @@ def test_auto_size_dresses_the_next_size_when_the_drape_refuses_one():
     assert rep["sizes_tried"][0]["error"] == "tight: stretched 7 %"
 
 
-def test_shoulder_seams_open_with_the_arms_close_stop_at_once():
+def test_shoulder_seams_open_with_the_arms_close_are_sewn_again_with_the_arms_raised(monkeypatch):
     """default:female as a scan with its arms lowered 20 degrees (5.4 cm from the torso 10 cm
-    below the armpits, Measurements.arm_gap): a sewing failure beside the arms is not retried in
-    larger sizes and says why (its arms; tests/test_drape.py's slow tests dress such bodies for
-    real). The same failure lower down, or on the A-pose body, stays a size problem. The drape
-    here is a stand-in that refuses every size. Such a body is sewn with friction (the A-pose
-    body without)."""
+    below the armpits, Measurements.arm_gap): a sewing failure beside the arms is dressed again in
+    the same size with the arms raised (engine.scene.arms; tests/test_drape.py's slow tests dress
+    such bodies for real), and --size auto goes on to larger sizes with them raised. When the
+    arms cannot be raised, it ends at once and says why (its arms), not retried in larger sizes.
+    The same failure lower down, or on the A-pose body, stays a size problem. The drape here is a
+    stand-in that refuses every size. Such a body is sewn with friction (the A-pose body without)."""
+    import engine.scene.arms as arms
     from engine.body.measure import ARM_GAP_OK, measure
     from engine.body.motion import _rot, pose_joints
     from engine.body.rig import skin
@@ -278,8 +280,8 @@ def test_shoulder_seams_open_with_the_arms_close_stop_at_once():
     asked = []
 
     def refusing(at):
-        def dress(spec, place, name):
-            asked.append(name)
+        def dress(spec, place, name, lift=None):
+            asked.append((name.split(" ")[1].strip("(,"), lift))
             e = SimulationError("sewing did not close within 4.0 s of simulated time; open seams: "
                                 "front[1]-back[10] (15.4 cm). The garment may be too small for this "
                                 "body (try a larger size) or the panels start too far apart")
@@ -289,6 +291,30 @@ def test_shoulder_seams_open_with_the_arms_close_stop_at_once():
 
     with pytest.raises(SimulationError) as err:
         dress_in_size("dress", scan, "auto", refusing(m.armpit_height + 0.1))
+    sizes = [s for s, _ in asked]
+    lifts = [lift for _, lift in asked]
+    assert sizes[:2] == [sizes[0]] * 2 and len(sizes) == 4 and len(set(sizes[1:])) == 3  # M, M raised, L, XL
+    assert lifts[0] is None and all(lift is lifts[1] for lift in lifts[1:]) and lifts[1].degrees == 20.0
+    msg = str(err.value)
+    assert "dressed with the arms raised 20 degrees (they hang 5.4 cm from the torso" in msg
+    assert "--size auto tried" in msg and err.value.too_small
+    asked.clear()
+    with pytest.raises(SimulationError, match="try a larger size.*arms raised 20 degrees"):  # an explicit size
+        dress_in_size("dress", scan, "S", refusing(m.armpit_height + 0.1))
+    assert [s for s, _ in asked] == ["S", "S"]
+    asked.clear()
+    with pytest.raises(SimulationError, match=r"--size auto tried"):  # open below the armpits: sizes
+        dress_in_size("dress", scan, "auto", refusing(m.armpit_height - 0.25))
+    assert len(asked) == 3 and all(lift is None for _, lift in asked)
+    asked.clear()
+    with pytest.raises(SimulationError, match=r"--size auto tried"):  # the A-pose: sizes
+        dress_in_size("dress", a_pose, "auto", refusing(1.4))
+    assert len(asked) == 3 and all(lift is None for _, lift in asked)
+    # arms that cannot be raised (e.g. no skeleton fits): the reason, at once, in any size
+    monkeypatch.setattr(arms, "lift_arms", lambda body: None)
+    asked.clear()
+    with pytest.raises(SimulationError) as err:
+        dress_in_size("dress", scan, "auto", refusing(m.armpit_height + 0.1))
     assert len(asked) == 1 and not err.value.too_small
     msg = str(err.value)
     assert "arms hang close to its torso (5.4 cm away" in msg and "a larger size will not help" in msg
@@ -296,14 +322,6 @@ def test_shoulder_seams_open_with_the_arms_close_stop_at_once():
     asked.clear()
     with pytest.raises(SimulationError, match="arms hang close"):  # an explicit size: no size hint
         dress_in_size("dress", scan, "S", refusing(m.armpit_height + 0.1))
-    asked.clear()
-    with pytest.raises(SimulationError, match=r"--size auto tried"):  # open below the armpits: sizes
-        dress_in_size("dress", scan, "auto", refusing(m.armpit_height - 0.25))
-    assert len(asked) == 3
-    asked.clear()
-    with pytest.raises(SimulationError, match=r"--size auto tried"):  # the A-pose: sizes
-        dress_in_size("dress", a_pose, "auto", refusing(1.4))
-    assert len(asked) == 3
 
 
 def test_armholes_go_deeper_round_thick_arms():

@@ -72,7 +72,8 @@ def arms_in_the_way(err: Exception, body: Body) -> bool:
 
 
 def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
-    """Resolve GARMENT and dress the body with `dress(spec, place, name) -> (result, report)`.
+    """Resolve GARMENT and dress the body with `dress(spec, place, name, **kw) -> (result, report)`
+    (kw: `lift`, passed on to engine.scene.tryon.run_tryon).
     With --size auto on a catalogue garment, the size recommended from the body's girths comes
     first; if it comes out too small -- its drape refused it (seams that cannot close, cloth
     stretched past DrapeOptions.too_tight) or ended tight (report["tight"]) -- the next larger
@@ -82,31 +83,55 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
     When every size tried is too small, the least stretched tight result is returned (its
     warnings say so), or the last refusal raised. Other sizes and pattern files are dressed
     once; a too-small error then names the size auto would pick (add_size_hint). Seams beside
-    the arms that cannot close on a body whose arms hang close to its torso end the try-on at
-    once with that reason (arms_in_the_way), in any size."""
+    the arms that cannot close on a body whose arms hang close to its torso (arms_in_the_way):
+    the same size is dressed again with the arms raised and then lowered (engine.scene.arms),
+    and so are the larger sizes --size auto goes on to; if the arms cannot be raised, the
+    try-on ends with that reason, in any size."""
     from engine.errors import SimulationError
     from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES, make_garment, recommend_size
 
-    if arg not in CATALOGUE or size != AUTO:
-        spec, place, name = resolve_garment(arg, body, size)
+    lifted = []  # the ArmLift, once the arms were found in the way
+
+    def attempt(resolve, label=lambda name: name):
+        """dress(*resolve(body)); with the arms raised when they are in the way."""
+        if not lifted:
+            spec, place, name = resolve(body)
+            try:
+                return dress(spec, place, label(name))
+            except SimulationError as e:
+                if not arms_in_the_way(e, body):
+                    raise
+                from engine.scene.arms import lift_arms
+
+                lift = lift_arms(body)
+                if lift is None:
+                    raise
+                lifted.append(lift)
+        lift = lifted[0]
+        spec, place, name = resolve(lift.raised)
         try:
-            return dress(spec, place, name)
+            return dress(spec, place, label(name), lift=lift)
         except SimulationError as e:
-            if not arms_in_the_way(e, body):
-                add_size_hint(e, arg, body, size)
+            e.args = (f"{e} ({lift.describe()})",) + tuple(e.args[1:])
+            raise
+
+    if arg not in CATALOGUE or size != AUTO:
+        try:
+            return attempt(lambda b: resolve_garment(arg, b, size))
+        except SimulationError as e:
+            add_size_hint(e, arg, body, size)  # (only a too-small error; not the arms in the way)
             raise
     first = SIZES.index(recommend_size(arg, body))
     sizes = SIZES[first:first + 1 + AUTO_TRIES]
     tried: list[dict] = []
     tight = None  # the least stretched tight result so far: (result, report, size)
     for k, s in enumerate(sizes):
-        spec, place, name = make_garment(arg, body, s)
         how = "chosen from the body's girths" if not tried else \
             f"chosen by draping: {', '.join(t['size'] for t in tried)} too small"
         try:
-            res, report = dress(spec, place, name[:-1] + f", {how})")
+            res, report = attempt(lambda b: make_garment(arg, b, s), lambda name: name[:-1] + f", {how})")
         except SimulationError as e:
-            if not getattr(e, "too_small", False) or arms_in_the_way(e, body):
+            if not getattr(e, "too_small", False):
                 raise
             if k == len(sizes) - 1 and tight is None:
                 e.args = (f"{e} (--size auto tried {', '.join([t['size'] for t in tried] + [s])})",) \

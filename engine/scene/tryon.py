@@ -69,9 +69,11 @@ def plan_maps(body: Body, garment: Garment, texel: float, collision: str) -> Try
 def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float = 0.015,
               texel: float = 0.005, collision: str = "image", options: DrapeOptions | None = None,
               place=None, source: str = "pattern", progress: Progress | None = None,
-              observer=None) -> tuple[DrapeResult, dict]:
+              observer=None, lift=None) -> tuple[DrapeResult, dict]:
     """Sew and drape `spec` on `body`; returns the result and the report (see DESIGN).
-    observer: see engine.scene.drape.Observer (the cloth as it is simulated, for a live view)."""
+    observer: see engine.scene.drape.Observer (the cloth as it is simulated, for a live view).
+    lift: an engine.scene.arms.ArmLift of `body` -- sew and drape on its raised body (`place`
+    made for that body), then lower the arms and settle on `body`."""
     from engine.collide.bvh import MeshBVH, ObjectSpaceCollider, penetration_stats
 
     progress = progress or (lambda *a: None)
@@ -79,7 +81,11 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
         raise InputError(f"collision '{collision}': use image or object")
     if not (0.0005 <= texel <= 0.05):
         raise InputError(f"texel {texel * 1000:.2f} mm is out of range (0.5 .. 50 mm)")
+    if lift is not None and collision != "image":
+        raise InputError("dressing with the arms raised and lowering them needs the image-space collision "
+                         "(--collision image)")
     o = replace(options or DrapeOptions(), fabric=fabric)
+    loaded, body = body, (lift.raised if lift is not None else body)  # the body sewn and draped on
     sew_note = None
     if o.sew_friction is None:
         o.sew_friction, sew_note = sewing_friction(body)
@@ -108,11 +114,25 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
         collider = ObjectSpaceCollider(body.vertices, body.faces, tolerance=o.params.tolerance)
         map_info = {"maps": [], "bvh_triangles": int(len(body.faces))}
     t_maps = time.perf_counter() - t0
+    if lift is not None and observer is not None:  # a live view shows the raised body while sewing
+        shown, watch = [False], observer
+
+        def observer(stage, x, tri, bv):
+            if not shown[0] and bv is None:
+                bv, shown[0] = body.vertices, True
+            watch(stage, x, tri, bv)
     res = sew_and_drape(garment, collider, o, progress, observer=observer)
     res.spec = spec
+    if lift is not None:
+        from engine.scene.arms import lower_arms
+
+        plan_l = plan_maps(lift.rigged, garment, texel, collision)
+        res = lower_arms(lift, res, o, texel=texel, window=plan_l.window, segments=plan_l.segments,
+                         progress=progress, observer=observer)
+        body = loaded
     bvh = MeshBVH(body.vertices, body.faces)
     pen = penetration_stats(body.vertices, body.faces, res.positions, bvh=bvh)
-    iters = res.iterations["sewing"] + res.iterations["draping"]
+    iters = sum(res.iterations.values())
     tc, tk = res.timing["cloth_total"], res.timing["collision_total"]
     fab = get_fabric(fabric)
     shift = hang_shift(garment.positions, res.positions)
@@ -125,7 +145,7 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
         "dt_ms": res.dt * 1000, "dt_bound_ms": res.model.dt_bound * 1000,
         "ms_per_iteration": {"cloth": 1000 * tc / max(iters, 1), "collision": 1000 * tk / max(iters, 1),
                              "total": 1000 * (tc + tk) / max(iters, 1)},
-        "wall_seconds": {"maps": t_maps, "sewing": res.timing["sewing"], "draping": res.timing["draping"],
+        "wall_seconds": {"maps": t_maps, **{k: v for k, v in res.timing.items() if not k.endswith("_total")},
                          "total": time.perf_counter() - t_all},
         "penetration_mm": {"max": pen["max"] * 1000, "p99": pen["p99"] * 1000,
                            "count_inside": int(pen["count_inside"])},
@@ -145,6 +165,10 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
         "warnings": garment.warnings + hang_warnings(shift) + fit_warnings(res.strain_max, fab, res.settled,
                                                                            o.drape_budget),
     }
+    if lift is not None:
+        report["arms_lowered"] = {"degrees": lift.degrees, "arm_gap_cm": {"as_loaded": 100 * lift.gap_loaded,
+                                                                           "raised": 100 * lift.gap_raised},
+                                  "why": lift.describe(), **res.lowering}
     return res, report
 
 

@@ -1,0 +1,174 @@
+"""Dress a body whose arms hang close to its torso: with the arms raised, then lowered.
+
+A top sewn on such a body fails: the seams beside the arms cannot close with an arm in the way
+(engine.scene.garments.arms_in_the_way; measured: default:female as a scan with its arms
+lowered 30 degrees, 2.4 cm from the torso, its dress stayed 2.1 cm open, its sleeveless shirt
+8 cm, its shirt 9.4 cm). Then (`lift_arms`, `lower_arms`):
+
+1. The body gets the default body's skeleton fitted (engine.body.fit) and its upper arms are
+   turned out about the shoulders, LIFT_STEP degrees at a time up to LIFT_MAX, until they hang
+   at least ARM_GAP_OK + LIFT_MARGIN from the torso (the A-pose the seams sew reliably in).
+2. The garment is placed, sewn and draped on that raised body as usual (engine.scene.tryon).
+3. The arms are lowered back over LOWER_TIME (smoothstep) and held for HOLD_TIME, the cloth
+   simulated on the moving body (engine.scene.walk's machinery, maps of every frame), without
+   cloth-body friction so that the arms slide past the cloth instead of dragging it down.
+4. On the body as loaded, the cloth relaxes without friction for RELAX_TIME and then drapes as
+   usual until it settles (engine.scene.drape.drape).
+
+Measured on that scan (M, cotton; one run each, /tmp experiments of 2026-12-01):
+- with friction while lowering: the dress ended at 11.9 % strain (cloth dragged down under the
+  arms, pressed between arm and torso);
+- without it, then settled as usual: dress 6.5 %, sleeveless shirt 12.6 %, shirt 5.9 % (settled);
+- without friction for the whole settle: sleeveless shirt 5.9 %, but still sliding after 6 s;
+- without it for RELAX_TIME, then as usual (kept): dress 6.6 % (settled), sleeveless shirt 5.9 %
+  (not settled in 6 s).
+A drape unsettled or tight after this says so in the report's warnings, as any drape.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from engine.body.types import Body
+from engine.cloth.model import ClothState
+from engine.cloth.solver import ClothSolver
+from engine.errors import InputError
+from engine.scene.drape import DrapeOptions, DrapeResult, Progress, drape
+
+LIFT_STEP = 5.0  # degrees
+LIFT_MAX = 45.0  # degrees
+LIFT_MARGIN = 0.02  # m past ARM_GAP_OK
+LOWER_TIME = 1.0  # s
+HOLD_TIME = 0.5  # s
+RELAX_TIME = 0.5  # s
+FPS = 30.0
+
+
+@dataclass
+class ArmLift:
+    rigged: Body  # the body as loaded, with a skeleton (engine.body.fit)
+    raised: Body  # ... with the upper arms turned out by `degrees`
+    degrees: float
+    gap_loaded: float  # m: the arms' distance from the torso (engine.body.measure.arm_gap)
+    gap_raised: float
+
+    def describe(self) -> str:
+        return (f"dressed with the arms raised {self.degrees:.0f} degrees (they hang "
+                f"{100 * self.gap_loaded:.1f} cm from the torso, {100 * self.gap_raised:.1f} cm raised), "
+                f"then lowered over {LOWER_TIME:.1f} s")
+
+
+def _pose(rigged: Body, degrees: float) -> np.ndarray:
+    from engine.body.motion import _rot, pose_joints
+    from engine.body.rig import skin_fast
+
+    turn = {"upperarm01.L": _rot("z", degrees), "upperarm01.R": _rot("z", -degrees)}  # left is +x
+    return skin_fast(rigged.vertices, rigged.rig, pose_joints(rigged.rig, turn))
+
+
+def lift_arms(body: Body) -> ArmLift | None:
+    """The raised body for `body` (module doc, step 1), or None when its arms need no raising,
+    or it cannot be fitted a skeleton or raised far enough."""
+    from engine.body.measure import ARM_GAP_OK, measure
+    from engine.scene.walk import walking_body
+
+    try:
+        gap = measure(body).arm_gap
+        if not gap < ARM_GAP_OK:
+            return None
+        rigged = walking_body(body)
+        names = set(rigged.rig.joint_names)
+        if not {"upperarm01.L", "upperarm01.R"} <= names:
+            return None
+        deg = 0.0
+        while deg < LIFT_MAX:
+            deg += LIFT_STEP
+            raised = Body(vertices=_pose(rigged, deg), faces=rigged.faces, name=f"{body.name} (arms raised)",
+                          segments=rigged.segments, rig=None, notes=[], to_world=body.to_world)
+            got = measure(raised).arm_gap
+            if got >= ARM_GAP_OK + LIFT_MARGIN:
+                return ArmLift(rigged=rigged, raised=raised, degrees=deg, gap_loaded=float(gap),
+                               gap_raised=float(got))
+    except InputError:
+        return None
+    return None
+
+
+def lowering_track(lift: ArmLift):
+    """The BodyTrack from the raised arms down to the body as loaded (smoothstep over LOWER_TIME),
+    then HOLD_TIME still."""
+    from engine.body.motion import BodyTrack
+
+    n_low, n_hold = int(round(LOWER_TIME * FPS)), int(round(HOLD_TIME * FPS))
+    frames = []
+    for k in range(n_low + n_hold + 1):
+        x = min(1.0, k / n_low)
+        frames.append(_pose(lift.rigged, lift.degrees * (1.0 - x * x * (3.0 - 2.0 * x))))
+    frames = np.asarray(frames, dtype=np.float32)
+    vel = np.zeros_like(frames)
+    vel[1:-1] = (frames[2:] - frames[:-2]) * (FPS / 2)
+    vel[0] = (frames[1] - frames[0]) * FPS
+    return BodyTrack(body=lift.rigged, fps=FPS, frames=frames, vel=vel, offsets=np.zeros((len(frames), 3)),
+                     cycle_start=0, cycle_frames=0, shift=np.zeros(3), notes=[])
+
+
+def lower_arms(lift: ArmLift, res: DrapeResult, options: DrapeOptions, *, texel: float, window, segments,
+               progress: Progress | None = None, observer=None) -> DrapeResult:
+    """Steps 3 and 4 of the module doc: the drape `res` made on lift.raised, on lift.rigged
+    (the body as loaded). `window` and `segments` are the maps to settle against
+    (engine.scene.tryon.plan_maps on the body as loaded). Returns the drape with its iterations
+    and timing counting the new stages ("lowering_arms", "settling")."""
+    from engine.collide.collider import MapCollider
+    from engine.collide.maps import render_body_maps
+    from engine.scene.walk import WalkOptions, walk_cloth
+
+    o = options
+    progress = progress or (lambda *a: None)
+    p = o.params
+    track = lowering_track(lift)
+    t0 = time.perf_counter()
+    walk = walk_cloth(lift.rigged, res, WalkOptions(seconds=(len(track.frames) - 1) / FPS, fps=FPS, reuse_maps=False,
+                                                    vm_passes=p.vm_passes, collide_every=1,
+                                                    contact_rounds=p.contact_rounds, strain_guard=o.strain_guard,
+                                                    friction=0.0),
+                      texel=texel, tol=p.tolerance, track=track,
+                      progress=lambda s, f, m: progress("lowering arms", f, m),
+                      observer=None if observer is None else
+                      (lambda stage, x, tri, bv: observer("lowering arms", x, tri, bv)))
+    t_lower = time.perf_counter() - t0
+    frames = walk.garment_frames
+    state = ClothState(frames[-1].astype(np.float64), (frames[-1] - frames[-2]).astype(np.float64) * FPS)
+    t0 = time.perf_counter()
+    maps = render_body_maps(lift.rigged, texel=texel, window=window, segments=segments, tol=p.tolerance)
+    t_maps = time.perf_counter() - t0
+    collider = MapCollider(maps)
+    solver = ClothSolver(res.model, collider, dt=o.dt, force_dt=o.force_dt)
+    if p.strain_guard is None:
+        solver.strain_guard = o.strain_guard
+    relax = int(math.ceil(RELAX_TIME / solver.dt))
+    t0 = time.perf_counter()
+    for it in range(relax):
+        solver.step(state, damping_scale=o.drape_damping, friction_scale=0.0)
+        if it % 200 == 0:
+            progress("settling", 0.0, "relaxing the cloth after lowering the arms")
+    t_relax = time.perf_counter() - t0
+    settled = drape(res.model, state, collider, o, progress, observer, gravity_from=1.0, solver=solver)
+    w = walk.report
+    n_walk = int(w["frames"] * w["substeps_per_frame"])
+    walk_cloth_s = w["ms_per_frame"]["cloth"] * w["frames"] / 1000
+    walk_coll_s = w["ms_per_frame"]["collision"] * w["frames"] / 1000
+    settle_cloth = solver.timing["cloth"]  # the relaxation and the drape (one solver)
+    settle_coll = solver.timing["collision"]
+    out = replace(settled, iterations={**res.iterations, "lowering_arms": n_walk,
+                                       "settling": relax + settled.iterations["draping"]},
+                  timing={**res.timing, "lowering_arms": t_lower, "settling": t_maps + t_relax + settled.timing["draping"],
+                          "cloth_total": res.timing["cloth_total"] + walk_cloth_s + settle_cloth,
+                          "collision_total": res.timing["collision_total"] + walk_coll_s + settle_coll},
+                  seam_gap_max=res.seam_gap_max, snapped=res.snapped, spec=res.spec,
+                  lowering={"strain_max": float(w["strain_max"]), "penetration_mm": w["penetration_mm"],
+                            "frames": int(w["frames"])})
+    return out
