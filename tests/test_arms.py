@@ -72,3 +72,34 @@ def test_a_lift_needs_the_image_space_collision(arms30, lift):
     spec, place, name = resolve_garment("dress", lift.raised, "M")
     with pytest.raises(InputError, match="needs the image-space collision"):
         run_tryon(arms30, spec, place=place, source=name, collision="object", lift=lift)
+
+
+def test_a_coarse_shirt_is_dressed_with_the_arms_raised_and_lowered(arms30, lift):
+    """run_tryon with the lift, at a 3 cm cloth edge (the full resolution: tests/test_drape.py,
+    slow): sewn and draped on the raised body, the arms lowered, settled on the body as loaded.
+    A live view is shown the raised body while sewing and the body moving while the arms come
+    down; the report counts the extra stages and measures penetration against the body as
+    loaded."""
+    from engine.scene.garments import resolve_garment
+    from engine.scene.tryon import run_tryon
+
+    spec, place, name = resolve_garment("shirt", lift.raised, "M")
+    shown = []
+
+    def observer(stage, x, tri, bv):
+        assert np.all(np.isfinite(x))
+        if bv is not None:
+            shown.append((stage, float(np.ptp(bv[:, 0]))))
+
+    res, rep = run_tryon(arms30, spec, h=0.03, place=place, source=name, lift=lift, observer=observer)
+    width_raised, width_loaded = np.ptp(lift.raised.vertices[:, 0]), np.ptp(arms30.vertices[:, 0])
+    assert shown[0] == ("sewing", pytest.approx(width_raised))
+    lowering = [w for stage, w in shown if stage == "lowering arms"]
+    assert len(lowering) == 45 and lowering[-1] == pytest.approx(width_loaded, abs=1e-4)
+    assert rep["iterations"] == sum(rep["iterations_by_stage"].values())
+    assert rep["iterations_by_stage"]["lowering_arms"] > 0 and rep["iterations_by_stage"]["settling"] > 0
+    assert rep["wall_seconds"]["lowering_arms"] > 0 and rep["wall_seconds"]["settling"] > 0
+    assert rep["arms_lowered"]["frames"] == 45 and rep["body"] == arms30.name
+    assert rep["penetration_mm"]["max"] <= 3.0 and rep["penetration_mm"]["p99"] <= 1.0, rep["penetration_mm"]
+    assert rep["strain"]["max"] < rep["strain"]["threshold"] + 0.02, rep["strain"]
+    assert res.positions.shape == (rep["cloth_vertices"], 3)
