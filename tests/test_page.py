@@ -165,3 +165,33 @@ def test_page_plays_an_uploaded_animation(server, tmp_path):
             link.click()
         assert open(d.value.path(), "rb").read(4) == b"glTF"
     assert errors == [], errors
+
+
+@pytest.mark.slow
+def test_page_dresses_a_scan_with_the_arms_close_with_the_arms_raised(server, tmp_path):
+    """A scan whose arms hang 2.4 cm from its torso, a shirt: the seams beside the arms do not
+    close as loaded, so the try-on dresses it with the arms raised and lowers them
+    (engine.scene.arms); the page says so when it is done."""
+    from tests.samples import write_arms_lowered_scan
+
+    scan = write_arms_lowered_scan(tmp_path / "arms30.obj", 30.0)
+    with _page(server) as (page, errors):
+        page.set_input_files("#scan", str(scan))
+        page.wait_for_selector("#bodynotes li", timeout=60_000)
+        assert "sewn again with the arms raised" in page.inner_text("#bodynotes")
+        page.select_option("#garment", "shirt")
+        page.select_option("#size", "M")
+        page.select_option("#quality", "3")
+        _try_on(page)
+        text = page.inner_text("#status")
+        assert "Dressed with the arms raised 30 degrees (they hang 2.4 cm from the torso" in text, text
+        page.frame_locator("#viewer").locator("canvas").first.wait_for(timeout=60_000)
+        time.sleep(8)  # the recording plays: sewing on the raised body, the arms coming down, the drape
+        page.screenshot(path=str(SHOTS / "6-arms-raised.png"))
+        page.locator("#viewer").screenshot(path=str(tmp_path / "viewer.png"))
+    from PIL import Image
+
+    img = np.asarray(Image.open(tmp_path / "viewer.png").convert("RGB"))
+    body, cloth = _colour_share(img, (204, 173, 148), 60), _colour_share(img, (70, 110, 190), 60)
+    assert body > 0.002 and cloth > 0.002, (body, cloth)
+    assert errors == [], errors
