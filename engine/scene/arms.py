@@ -93,7 +93,7 @@ def lift_arms(body: Body) -> ArmLift | None:
             if got >= ARM_GAP_OK + LIFT_MARGIN:
                 return ArmLift(rigged=rigged, raised=raised, degrees=deg, gap_loaded=float(gap),
                                gap_raised=float(got))
-    except InputError:
+    except (InputError, ValueError, np.linalg.LinAlgError):  # no skeleton fits this body: the caller's error stands
         return None
     return None
 
