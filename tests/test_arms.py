@@ -74,9 +74,10 @@ def test_a_lift_needs_the_image_space_collision(arms30, lift):
         run_tryon(arms30, spec, place=place, source=name, collision="object", lift=lift)
 
 
+@pytest.mark.slow  # ~30 s here, ~50 s on CI: the default run stays under 10 minutes
 def test_a_coarse_shirt_is_dressed_with_the_arms_raised_and_lowered(arms30, lift):
     """run_tryon with the lift, at a 3 cm cloth edge (the full resolution: tests/test_drape.py,
-    slow): sewn and draped on the raised body, the arms lowered, settled on the body as loaded.
+    also slow): sewn and draped on the raised body, the arms lowered, settled on the body as loaded.
     A live view is shown the raised body while sewing and the body moving while the arms come
     down; the report counts the extra stages and measures penetration against the body as
     loaded."""
