@@ -119,7 +119,7 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
 
         def observer(stage, x, tri, bv):
             if not shown[0] and bv is None:
-                bv, shown[0] = body.vertices, True
+                bv, shown[0] = lift.raised.vertices, True
             watch(stage, x, tri, bv)
     res = sew_and_drape(garment, collider, o, progress, observer=observer)
     res.spec = spec
