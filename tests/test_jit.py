@@ -1,8 +1,9 @@
 """engine.jit.serial_kernel: kernels compiled with numba's parallel pipeline must stay serial --
 no array expression or np.zeros that numba would turn into a loop on its thread pool (those
 stall when another process holds a core). Checked on the kernels as the solver really calls
-them: a cloth falls onto a box for a few steps, then each serial kernel is compiled afresh
-(uncached, so numba's parfor diagnostics exist) for the argument types it was called with."""
+them: a cloth falls onto a box for a few steps, then each serial kernel's parfor diagnostics are
+read for the argument types it was called with -- numba keeps them for code compiled in this
+process; code loaded from numba's cache has none, and is compiled afresh (uncached) to get them."""
 
 from __future__ import annotations
 
@@ -56,6 +57,12 @@ def test_serial_kernels_compile_without_parallel_loops():
     K.kinetic_energy(state.v, m.mass), K.max_strain(state.x, m.springs, m.rest, solver.active)
     K.provot_positions(state.x, m.springs, m.rest, solver.active, 0.05, m.inv_mass, 2, solver.vm_work, False,
                        solver.contact, solver.contact_n)
+    # the response on its own (the solver's contact_rounds does the same work; tests/test_cloth.py
+    # compares them), on the last step's points
+    npt = len(solver.points)
+    K.collision_response(state.v, np.zeros(npt, np.int8), np.zeros((npt, 3)), np.zeros((npt, 3)), np.zeros(npt),
+                         np.zeros((npt, 3)), m.n, m.quads, m.tris, 0.005, 0.0, 0.4, 1e-4, solver.contact,
+                         solver.contact_n, solver.body_v)
     # the map query, on empty input with the map arrays' types
     Q.query_batch_serial(np.zeros((0, 3)), 0.005, np.zeros((2, 4, 4), np.float32), np.zeros((1, 1, 4), np.float32),
                          False, np.zeros((2, 4), np.int8), np.zeros((2, 4), np.int32), np.zeros((1, 3)),
@@ -67,10 +74,16 @@ def test_serial_kernels_compile_without_parallel_loops():
     for name, f in kernels:
         if not f.signatures:
             continue
-        fresh = njit(parallel=True, fastmath=f.targetoptions.get("fastmath", False))(f.py_func)
+        fresh = None
         for sig in f.signatures:
-            fresh.compile(sig)
-            diag = fresh.overloads[sig].metadata["parfor_diagnostics"]
+            # compiled in this process (a fresh clone: no numba cache yet), numba kept the
+            # diagnostics; loaded from the cache it did not: compile afresh, uncached
+            diag = (f.overloads[sig].metadata or {}).get("parfor_diagnostics")
+            if diag is None:
+                if fresh is None:
+                    fresh = njit(parallel=True, fastmath=f.targetoptions.get("fastmath", False))(f.py_func)
+                fresh.compile(sig)
+                diag = fresh.overloads[sig].metadata["parfor_diagnostics"]
             assert not diag.initial_parfors, f"{name} has a parallel loop (array expression / np.zeros?)"
         checked.append(name)
     for must in ("modify_velocities", "eval_forces_and_integrate", "collision_response", "query_batch_serial",
