@@ -332,6 +332,73 @@ def garments_cmd():
     _run(go)
 
 
+pattern_app = typer.Typer(no_args_is_help=True, help="Cutting patterns: import DXF pieces, export patterns to DXF.")
+app.add_typer(pattern_app, name="pattern")
+
+
+@pattern_app.command("import")
+def pattern_import_cmd(
+    dxf: Path = typer.Argument(..., help="A DXF of the pattern pieces (ASTM D6673 / AAMA: one block per piece, "
+                               "boundary on layer 1, turn points on layer 2; or closed polylines)."),
+    assembly: Optional[Path] = typer.Option(None, "--assembly", help="JSON with what a DXF does not hold: "
+                                            "stitches ({panel, edge} pairs, edge numbers as in the SVG), each "
+                                            "panel's translation (cm) and rotation (degrees), copies of pieces cut "
+                                            "twice (copy_of, mirror), the tryon block (fabric)."),
+    units: Optional[str] = typer.Option(None, "--units", help="mm, cm, m or in, when the DXF does not say."),
+    out: Path = typer.Option(Path("out/pattern"), "--out", help="Directory for pattern.json and pattern.svg."),
+):
+    """Turn a DXF cutting pattern into a GarmentCode specification (pattern.json, for `tryon drape
+    --garment`) and an SVG of its panels with every edge numbered."""
+
+    def go():
+        from engine.pattern.dxf import import_dxf, load_assembly
+        from engine.pattern.io import pattern_to_svg, save_pattern
+        from engine.pattern.validate import check
+
+        asm = load_assembly(assembly) if assembly is not None else None
+        spec, notes = import_dxf(dxf, asm, units)
+        problems = check(spec, dxf.name)  # errors raise; warnings come back
+        out.mkdir(parents=True, exist_ok=True)
+        for name, p in spec.pattern.panels.items():
+            typer.echo(f"{name}: {len(p.edges)} edges", err=True)
+        for line in [f"note: {n}" for n in notes] + [str(p) for p in problems]:
+            typer.echo(line, err=True)
+        (out / "pattern.svg").write_text(pattern_to_svg(spec, edge_numbers=True))
+        typer.echo(str(save_pattern(spec, out / "pattern.json")))
+        typer.echo(str(out / "pattern.svg"))
+
+    _run(go)
+
+
+@pattern_app.command("export")
+def pattern_export_cmd(
+    garment: str = typer.Argument(..., help="A catalogue garment (cut for --body in --size) or a pattern file (.json)."),
+    body: str = typer.Option("default:female", "--body", help=BODY_HELP),
+    size: Optional[str] = typer.Option(None, "--size", help="Catalogue size: XS .. XXL or auto (default M)."),
+    out: Path = typer.Option(Path("out/pattern"), "--out", help="Directory for pattern.dxf, assembly.json, pattern.svg."),
+):
+    """Write a pattern as a DXF for cutting (mm; ASTM/AAMA layers) with its assembly file, which
+    `tryon pattern import` reads back as the same pattern."""
+
+    def go():
+        from engine.pattern.dxf import assembly_of, write_dxf
+        from engine.pattern.io import pattern_to_svg
+        from engine.scene.garments import resolve_garment
+
+        is_file = garment.lower().endswith(".json") or Path(garment).exists()
+        b = None if is_file else _body(body, None, None)
+        spec, _, name = resolve_garment(garment, b, None if is_file else size)
+        out.mkdir(parents=True, exist_ok=True)
+        typer.echo(str(write_dxf(spec, out / "pattern.dxf")))
+        (out / "assembly.json").write_text(json.dumps(assembly_of(spec), indent=2))
+        typer.echo(str(out / "assembly.json"))
+        (out / "pattern.svg").write_text(pattern_to_svg(spec, edge_numbers=True))
+        typer.echo(str(out / "pattern.svg"))
+        typer.echo(f"{name}: {len(spec.pattern.panels)} panels, {len(spec.pattern.stitches)} stitches", err=True)
+
+    _run(go)
+
+
 def main() -> None:
     app()
 

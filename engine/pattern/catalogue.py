@@ -96,19 +96,11 @@ class Outline:
         for k, (name, a, b, ctrl) in enumerate(edges):
             e = {"endpoints": [a, b]}
             if ctrl is not None:
-                e["curvature"] = {"type": "quadratic", "params": [list(_abs_to_rel(self.pts[a], self.pts[b], ctrl))]}
+                e["curvature"] = {"type": "quadratic", "params": [list(geo.to_relative(self.pts[a], self.pts[b], ctrl))]}
             out_edges.append(e)
             index[name] = k
         return ({"translation": list(translation), "rotation": [0.0, 0.0, 0.0],
                  "vertices": [list(p) for p in self.pts], "edges": out_edges}, index)
-
-
-def _abs_to_rel(s, e, p):
-    s, e, p = np.asarray(s), np.asarray(e), np.asarray(p)
-    d = e - s
-    perp = np.array([-d[1], d[0]])
-    L2 = float(d @ d)
-    return float((p - s) @ d / L2), float((p - s) @ perp / L2)
 
 
 @dataclass

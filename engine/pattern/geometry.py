@@ -20,6 +20,15 @@ def _rel_to_abs(start: np.ndarray, end: np.ndarray, rel) -> np.ndarray:
     return start + rel[0] * e + rel[1] * perp
 
 
+def to_relative(start, end, p) -> tuple[float, float]:
+    """A point in GarmentCode's edge-local coordinates (the inverse of _rel_to_abs)."""
+    s, e, p = (np.asarray(a, dtype=np.float64) for a in (start, end, p))
+    d = e - s
+    perp = np.array([-d[1], d[0]])
+    L2 = float(d @ d)
+    return float((p - s) @ d / L2), float((p - s) @ perp / L2)
+
+
 def _circle_dense(start: np.ndarray, end: np.ndarray, radius: float, large_arc: bool, right: bool,
                   n: int) -> np.ndarray:
     chord = end - start

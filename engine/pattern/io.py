@@ -61,9 +61,10 @@ def save_pattern(spec: PatternSpec, path: str | Path) -> Path:
 _COLOURS = ["#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#e377c2", "#8c564b", "#bcbd22"]
 
 
-def pattern_to_svg(spec: PatternSpec, margin_cm: float = 5.0) -> str:
+def pattern_to_svg(spec: PatternSpec, margin_cm: float = 5.0, edge_numbers: bool = False) -> str:
     """Panels laid out side by side (in cm, y up flipped for SVG), stitched edges coloured in
-    pairs with their stitch number, panel names in the middle."""
+    pairs with their stitch number, panel names in the middle; edge_numbers: every edge's number
+    (grey, inside the panel by its middle), the numbers stitches name."""
     scale, rel = spec.scale, spec.properties.curvature_coords == "relative"
     stitch_of: dict[tuple[str, int], int] = {}
     for k, (a, b) in enumerate(spec.pattern.stitches):
@@ -90,8 +91,16 @@ def pattern_to_svg(spec: PatternSpec, margin_cm: float = 5.0) -> str:
         x, y = tf(poly)
         pts = " ".join(f"{a:.2f},{b:.2f}" for a, b in zip(x, y))
         out.append(f'<polygon points="{pts}" fill="#f3e7d3" stroke="#333" stroke-width="0.15"/>')
+        centre = poly.mean(axis=0)
         for i, e in enumerate(panel.edges):
             k = stitch_of.get((name, i))
+            if edge_numbers:
+                seg = geo.edge_dense(panel, e, scale, rel, 32) * 100.0 + offset
+                at = seg[len(seg) // 2]
+                at = at + 3.0 * (centre - at) / max(float(np.linalg.norm(centre - at)), 1e-9)  # 3 cm inside
+                ex, ey = tf(at[None])
+                out.append(f'<text x="{ex[0]:.2f}" y="{ey[0]:.2f}" font-size="2.0" fill="#777" '
+                           f'text-anchor="middle">e{i}</text>')
             if k is None:
                 continue
             seg = geo.edge_dense(panel, e, scale, rel, 32) * 100.0 + offset
