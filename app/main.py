@@ -239,7 +239,12 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
         from engine.pattern.io import parse_pattern
         from engine.pattern.validate import check
 
-        if Path(file.filename or "").suffix.lower() != ".json":
+        suffix = Path(file.filename or "").suffix.lower()
+        if suffix == ".dxf":
+            raise HTTPException(400, "a DXF holds the pieces but no seams or placement: turn it into a GarmentCode "
+                                "pattern with its assembly file first (tryon pattern import PIECES.dxf --assembly "
+                                "ASSEMBLY.json) and upload the pattern.json")
+        if suffix != ".json":
             raise HTTPException(400, "a pattern is a GarmentCode JSON specification (.json)")
         gid = new_id()
         dest = s.data_dir / "uploads" / f"pattern-{gid}.json"

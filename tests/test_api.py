@@ -78,6 +78,8 @@ def test_upload_body_and_pattern(idle):
     assert r.status_code == 201 and r.json()["info"]["panels"] >= 2
     r = idle.post("/api/garments", files={"file": ("bad.json", b"{nope")}, headers=h)
     assert r.status_code == 400 and "JSON" in r.json()["error"]
+    r = idle.post("/api/garments", files={"file": ("pieces.dxf", b"0\nSECTION\n")}, headers=h)
+    assert r.status_code == 400 and "tryon pattern import" in r.json()["error"]
     g = idle.get("/api/garments", headers=h).json()
     assert "dress" in [x["name"] for x in g["catalogue"]] and "M" in g["sizes"] and "silk" in g["fabrics"]
     assert g["sizes"][-1] == "auto"  # the smallest size that covers the body's girths

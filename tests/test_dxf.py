@@ -221,6 +221,14 @@ def test_pattern_commands(tmp_path):
     assert not (tmp_path / "bad").exists()
 
 
+def test_drape_points_a_dxf_to_the_import(tmp_path):
+    write_dxf(load_pattern(SAMPLE_SKIRT), tmp_path / "skirt.dxf")
+    r = CliRunner().invoke(app, ["drape", "--body", "default:female", "--garment", str(tmp_path / "skirt.dxf"),
+                                 "--out", str(tmp_path / "out")])
+    assert r.exit_code == 2 and "tryon pattern import skirt.dxf --assembly" in r.output, r.output
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.slow
 def test_the_sample_skirt_from_dxf_drapes_on_the_sample_body(tmp_path):
     """The whole way a shop's DXF goes: export, import with the assembly, drape (quality bars of

@@ -13,6 +13,10 @@ def resolve_garment(arg: str, body: Body, size: str | None = "M"):
     """Returns (PatternSpec, placement function or None for the spec's own, display name).
     size: catalogue size; None means the default (M) for catalogue garments."""
     path = Path(arg)
+    if path.suffix.lower() == ".dxf":
+        raise InputError(f"{path.name}: a DXF holds the pieces but no seams or placement; import it with its assembly "
+                         f"file first (tryon pattern import {path.name} --assembly ASSEMBLY.json --out DIR) and "
+                         "give DIR/pattern.json")
     if path.suffix.lower() == ".json" or path.exists():
         if size is not None:
             raise InputError(f"--size {size} applies to catalogue garments; a pattern file ({path.name}) "
