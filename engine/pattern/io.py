@@ -95,7 +95,7 @@ def pattern_to_svg(spec: PatternSpec, margin_cm: float = 5.0, edge_numbers: bool
         for i, e in enumerate(panel.edges):
             k = stitch_of.get((name, i))
             if edge_numbers:
-                seg = geo.edge_dense(panel, e, scale, rel, 32) * 100.0 + offset
+                seg = geo.edge_samples(panel, e, scale, 32, rel) * 100.0 + offset
                 at = seg[len(seg) // 2]
                 at = at + 3.0 * (centre - at) / max(float(np.linalg.norm(centre - at)), 1e-9)  # 3 cm inside
                 ex, ey = tf(at[None])
@@ -103,7 +103,7 @@ def pattern_to_svg(spec: PatternSpec, margin_cm: float = 5.0, edge_numbers: bool
                            f'text-anchor="middle">e{i}</text>')
             if k is None:
                 continue
-            seg = geo.edge_dense(panel, e, scale, rel, 32) * 100.0 + offset
+            seg = geo.edge_samples(panel, e, scale, 32, rel) * 100.0 + offset
             sx, sy = tf(seg)
             c = _COLOURS[k % len(_COLOURS)]
             d = " ".join(f"{a:.2f},{b:.2f}" for a, b in zip(sx, sy))
