@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from engine.body.load import _read, load_body_file
-from engine.body.motion import BodyTrack
+from engine.body.motion import BodyTrack, frame_velocities
 from engine.body.types import Body
 from engine.errors import InputError
 
@@ -91,10 +91,7 @@ def _track(path: Path, first: Body, frames_raw: list, names: list[str], fps: flo
         if not np.all(np.isfinite(w)):
             raise InputError(f"frame '{names[k]}' has non-finite vertex positions")
         frames[k] = w
-    step = np.diff(frames, axis=0).astype(np.float64) * fps
-    vel = np.empty_like(frames)
-    vel[0], vel[-1] = step[0], step[-1]
-    vel[1:-1] = 0.5 * (step[1:] + step[:-1])
+    vel = frame_velocities(frames, fps)
     speed = np.linalg.norm(vel, axis=2).max()
     if speed > 20.0:
         raise InputError(f"{path.name}: a body point moves at {speed:.0f} m/s between frames: is --fps right, or are "

@@ -62,6 +62,16 @@ class WalkParams:
             raise InputError(f"ramp {self.ramp} s is out of range (0 .. 5 s)")
 
 
+def frame_velocities(frames: np.ndarray, fps: float) -> np.ndarray:
+    """(F, N, 3) float32 vertex velocities of frames (F, N, 3) played at fps: frame differences,
+    central inside, one-sided at the two ends."""
+    step = np.diff(frames, axis=0).astype(np.float64) * fps
+    vel = np.empty(frames.shape, np.float32)
+    vel[0], vel[-1] = step[0], step[-1]
+    vel[1:-1] = 0.5 * (step[1:] + step[:-1])
+    return vel
+
+
 @dataclass
 class BodyTrack:
     """A body moving over time, sampled at `fps`.

@@ -121,7 +121,7 @@ def _closed_polylines(entities) -> list[np.ndarray]:
     return out
 
 
-def _piece_from(name: str, entities, to_cm: float, source: str) -> Piece | None:
+def _piece_from(name: str, entities, to_cm: float) -> Piece | None:
     ents = list(entities)
     boundary = [e for e in ents if _layer(e) == "1"]
     polys = _closed_polylines(boundary) or _closed_polylines(ents)
@@ -210,7 +210,7 @@ def read_dxf(path: str | Path, units: str | None = None) -> list[Piece]:
         if block is None:
             continue
         inserted.add(name)
-        p = _piece_from(name, block, to_cm, path.name)
+        p = _piece_from(name, block, to_cm)
         if p is not None:
             pieces.append(p)
     if not pieces:  # a plain drawing: each closed polyline is a piece, in its own frame
@@ -235,11 +235,6 @@ def read_dxf(path: str | Path, units: str | None = None) -> list[Piece]:
 # ------------------------------------------------------------------ outline -> edges
 
 
-def _cubic(s, c1, c2, e, t):
-    t = t[:, None]
-    return (1 - t) ** 3 * s + 3 * (1 - t) ** 2 * t * c1 + 3 * (1 - t) * t ** 2 * c2 + t ** 3 * e
-
-
 def fit_cubic(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """The cubic Bezier from pts[0] to pts[-1] closest to the points (least squares, chord-length
     parameters refined by projection): (c1, c2, max distance of the points from it)."""
@@ -252,7 +247,7 @@ def fit_cubic(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         b1, b2 = 3 * (1 - t) ** 2 * t, 3 * (1 - t) * t ** 2
         rhs = pts - ((1 - t) ** 3)[:, None] * s - (t ** 3)[:, None] * e
         (c1, c2), *_ = np.linalg.lstsq(np.stack([b1, b2], axis=1), rhs, rcond=None)
-        curve = _cubic(s, c1, c2, e, dense_t)
+        curve = geo.bezier3(s, c1, c2, e, dense_t)
         d = np.linalg.norm(pts[:, None, :] - curve[None, :, :], axis=2)
         err = float(d.min(axis=1).max())
         if err < best[2]:
@@ -282,12 +277,10 @@ def _fit_arc(pts: np.ndarray) -> dict | None:
     r = float(np.hypot(cx, cy))
     if np.abs(np.linalg.norm(pts - centre, axis=1) - r).max() > FIT_TOL:
         return None
-    chord = e - s
-    right = (chord[0] * (m - s)[1] - chord[1] * (m - s)[0]) < 0  # the middle lies right of start -> end
-    # the arc is the large one when its middle lies on the same side of the chord as the centre
-    side_m = chord[0] * (m - s)[1] - chord[1] * (m - s)[0]
-    side_c = chord[0] * (centre - s)[1] - chord[1] * (centre - s)[0]
-    large = bool(side_m * side_c > 0)
+    side_m = -cross  # > 0: the middle lies left of start -> end, < 0: right
+    side_c = b[0] * cy - b[1] * cx
+    right = side_m < 0
+    large = bool(side_m * side_c > 0)  # the middle on the same side of the chord as the centre
     return {"type": "circle", "params": [r, int(large), int(right)]}
 
 

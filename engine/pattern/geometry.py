@@ -65,11 +65,17 @@ def edge_dense(panel: Panel, edge: Edge, scale: float, relative: bool = True, n:
         radius, large_arc, right = c.params
         return _circle_dense(s, e, float(radius) * scale, bool(large_arc), bool(right), n)
     ctrl = [(_rel_to_abs(s, e, p) if relative else np.asarray(p, dtype=np.float64) * scale) for p in c.params]
-    t = np.linspace(0.0, 1.0, n)[:, None]
+    t = np.linspace(0.0, 1.0, n)
     if c.type == "quadratic":
         (c1,) = ctrl
+        t = t[:, None]
         return (1 - t) ** 2 * s + 2 * (1 - t) * t * c1 + t**2 * e
-    c1, c2 = ctrl
+    return bezier3(s, *ctrl, e, t)
+
+
+def bezier3(s, c1, c2, e, t: np.ndarray) -> np.ndarray:
+    """(len(t), 2) points of the cubic Bezier s, c1, c2, e at parameters t."""
+    t = t[:, None]
     return (1 - t) ** 3 * s + 3 * (1 - t) ** 2 * t * c1 + 3 * (1 - t) * t**2 * c2 + t**3 * e
 
 

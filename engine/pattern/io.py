@@ -94,8 +94,10 @@ def pattern_to_svg(spec: PatternSpec, margin_cm: float = 5.0, edge_numbers: bool
         centre = poly.mean(axis=0)
         for i, e in enumerate(panel.edges):
             k = stitch_of.get((name, i))
+            if not edge_numbers and k is None:
+                continue
+            seg = geo.edge_samples(panel, e, scale, 32, rel) * 100.0 + offset
             if edge_numbers:
-                seg = geo.edge_samples(panel, e, scale, 32, rel) * 100.0 + offset
                 at = seg[len(seg) // 2]
                 at = at + 3.0 * (centre - at) / max(float(np.linalg.norm(centre - at)), 1e-9)  # 3 cm inside
                 ex, ey = tf(at[None])
@@ -103,7 +105,6 @@ def pattern_to_svg(spec: PatternSpec, margin_cm: float = 5.0, edge_numbers: bool
                            f'text-anchor="middle">e{i}</text>')
             if k is None:
                 continue
-            seg = geo.edge_samples(panel, e, scale, 32, rel) * 100.0 + offset
             sx, sy = tf(seg)
             c = _COLOURS[k % len(_COLOURS)]
             d = " ".join(f"{a:.2f},{b:.2f}" for a, b in zip(sx, sy))

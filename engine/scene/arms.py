@@ -101,7 +101,7 @@ def lift_arms(body: Body) -> ArmLift | None:
 def lowering_track(lift: ArmLift):
     """The BodyTrack from the raised arms down to the body as loaded (smoothstep over LOWER_TIME),
     then HOLD_TIME still."""
-    from engine.body.motion import BodyTrack
+    from engine.body.motion import BodyTrack, frame_velocities
 
     n_low, n_hold = int(round(LOWER_TIME * FPS)), int(round(HOLD_TIME * FPS))
     frames = []
@@ -109,10 +109,8 @@ def lowering_track(lift: ArmLift):
         x = min(1.0, k / n_low)
         frames.append(_pose(lift.rigged, lift.degrees * (1.0 - x * x * (3.0 - 2.0 * x))))
     frames = np.asarray(frames, dtype=np.float32)
-    vel = np.zeros_like(frames)
-    vel[1:-1] = (frames[2:] - frames[:-2]) * (FPS / 2)
-    vel[0] = (frames[1] - frames[0]) * FPS
-    return BodyTrack(body=lift.rigged, fps=FPS, frames=frames, vel=vel, offsets=np.zeros((len(frames), 3)),
+    return BodyTrack(body=lift.rigged, fps=FPS, frames=frames, vel=frame_velocities(frames, FPS),
+                     offsets=np.zeros((len(frames), 3)),
                      cycle_start=0, cycle_frames=0, shift=np.zeros(3), notes=[])
 
 
