@@ -600,6 +600,69 @@ def test_weld_keeps_the_longer_rest_of_an_eased_seam():
     assert len(rest) == len(w.springs)  # no duplicate springs left
 
 
+def _two_strips(h: float = 0.01):
+    """Two 1 x 2-quad panels side by side in the flat, A's right column stitched to B's left."""
+    uv = np.array([[0, y] for y in (0, h, 2 * h)] + [[h, y] for y in (0, h, 2 * h)] +  # A: 0-2 left, 3-5 seam
+                  [[5 * h, y] for y in (0, h, 2 * h)] + [[6 * h, y] for y in (0, h, 2 * h)], dtype=float)  # B
+    quads = np.array([[0, 3, 4, 1], [1, 4, 5, 2], [6, 9, 10, 7], [7, 10, 11, 8]], dtype=np.int32)
+    panel = np.repeat([0, 1], 6)
+    lattice = np.full((12, 2), -1)
+    seams = np.array([[3, 6], [4, 7], [5, 8]], dtype=np.int32)
+    m = build_model(uv, panel, lattice, quads, np.zeros((0, 3), np.int32), seams, get_fabric("cotton"), h)
+    return uv, m, seams
+
+
+def test_welding_adds_flexion_springs_across_the_seam():
+    """Each stitch pair gets a flexion spring from A's neighbour square to the seam to B's, resting
+    at the two panels lying flat (2 h); without the flat uv there are none (a free hinge)."""
+    uv, m, seams = _two_strips()
+    vmap = merge_map(m.n, seams.astype(np.int64))
+    plain, sewn = weld_model(m, vmap), weld_model(m, vmap, uv)
+    assert len(sewn.springs) == len(plain.springs) + 3
+    new = {tuple(sorted(p)): (r, k) for p, r, k in zip(sewn.springs[-3:].tolist(), sewn.rest[-3:], sewn.kind[-3:])}
+    assert set(new) == {tuple(sorted((vmap[a], vmap[b]))) for a, b in ((0, 9), (1, 10), (2, 11))}
+    assert all(np.isclose(r, 0.02) and k == FLEXION for r, k in new.values())
+
+
+def test_a_sewn_seam_folded_flat_opens():
+    """The two strips welded and folded 180 degrees at the seam (B lying on A, 2 mm above):
+    with the seam's flexion springs the fold opens; without them it stays shut."""
+    uv, m, seams = _two_strips()
+    vmap = merge_map(m.n, seams.astype(np.int64))
+    spread = {}
+    for label, w in (("hinge", weld_model(m, vmap)), ("sewn", weld_model(m, vmap, uv))):
+        x = np.zeros((w.n, 3))
+        for i in range(m.n):  # A flat at z = 0; B folded back over it at z = 2 mm
+            u = uv[i, 0] if i < 6 else 2 * 0.01 - (uv[i, 0] - 4 * 0.01)
+            x[vmap[i]] = [u, uv[i, 1], 0.0 if i < 6 else 0.002 * (uv[i, 0] - 5 * 0.01) / 0.01]
+        st = ClothState(x, np.zeros_like(x))
+        s = ClothSolver(w, None, gravity=np.zeros(3))
+        for _ in range(3000):
+            s.step(st)
+        assert np.isfinite(st.x).all()
+        spread[label] = float(np.linalg.norm(st.x[vmap[0]] - st.x[vmap[9]]))  # 0 when shut, 2 h when flat
+    assert spread["hinge"] < 0.005 and spread["sewn"] > 0.01, spread
+
+
+def test_sharp_folds_counts_cloth_folded_back():
+    """A flat sheet has none; folded back on itself along one row of edges, that row counts."""
+    from engine.scene.tryon import sharp_folds
+
+    n = 6
+    g = np.stack(np.meshgrid(np.arange(n), np.arange(n), indexing="ij"), -1).reshape(-1, 2) * 0.01
+    idx = np.arange(n * n).reshape(n, n)
+    tris = np.concatenate([np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:]], -1).reshape(-1, 3),
+                           np.stack([idx[:-1, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 3)])
+    flat = np.c_[g, np.zeros(len(g))]
+    assert sharp_folds(flat, tris)["count"] == 0
+    assert sharp_folds(flat, tris)["edges"] == 3 * 25 - 2 * 5  # the interior edges of 5 x 5 squares
+    folded = flat.copy()
+    over = g[:, 0] > 0.025  # rows past x = 2.5 cm fold back over the rest, 1 mm above
+    folded[over, 0] = 0.06 - g[over, 0]
+    folded[over, 2] = 0.001
+    assert sharp_folds(folded, tris)["count"] == n - 1  # the row of edges on the crease x = 3 cm
+
+
 def test_mass_scaling_on_a_catalogue_dress_lengthens_the_step_for_little_mass():
     """The catalogue dress at 1.5 cm (sliver points on clipped outlines, stiff spring stars):
     mass scaling lifts at most 5 % of the points, adds under 1 % of the weight, and lengthens

@@ -269,6 +269,31 @@ def test_sample_skirt_quality(tmp_path):
     body = resolve_body(str(SAMPLE_BODY))
     _, rep = run_tryon(body, load_pattern(SAMPLE_SKIRT), source="sample skirt")
     _check_quality(rep)
+    assert rep["sharp_folds"]["count"] <= SKIRT_SHARP_FOLDS, rep["sharp_folds"]
+
+
+SKIRT_SHARP_FOLDS = 40  # a hanging flared skirt: 0-29 edges folded back; crumpled, 74-88
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2])
+def test_the_sample_skirt_hangs_however_its_outline_rounds(seed):
+    """The sample skirt with its outline moved by 1e-9 cm (rounding; the mesher's boundary
+    triangles change): sewn at 20 x damping, both these runs came out with the hem crumpled at
+    the side seams and the waistband askew (74 and 88 edges folded back, sharp_folds), though
+    welded, settled and within the strain and penetration bars. Now they hang like the
+    unperturbed one."""
+    from engine.body import resolve_body
+    from engine.pattern.io import parse_pattern
+    from engine.scene.tryon import run_tryon
+
+    d = json.loads(SAMPLE_SKIRT.read_text())
+    rng = np.random.default_rng(seed)
+    for p in d["pattern"]["panels"].values():
+        p["vertices"] = [[x + rng.normal() * 1e-9, y + rng.normal() * 1e-9] for x, y in p["vertices"]]
+    _, rep = run_tryon(resolve_body(str(SAMPLE_BODY)), parse_pattern(d), source="sample skirt")
+    _check_quality(rep)
+    assert rep["sharp_folds"]["count"] <= SKIRT_SHARP_FOLDS, rep["sharp_folds"]
 
 
 @pytest.mark.slow

@@ -239,11 +239,52 @@ def _assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, 
                       seams=seams, fabric=fabric, params=params, dt_bound=dt_bound, edge_length=h)
 
 
-def weld_model(model: ClothModel, vertex_map: np.ndarray) -> ClothModel:
+def seam_flexion(uv: np.ndarray, springs: np.ndarray, kind: np.ndarray, rest: np.ndarray,
+                 seams: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Flexion springs across sewn seams, on the unsewn vertex indices: for each stitch pair
+    (a, b), a's neighbour in its panel most nearly square to the seam, to b's likewise, with the
+    rest length of the two panels lying flat across the seam (the sum of the two edges). Without
+    them a seam is a free hinge: a skirt sewn flat at its sides kept the 180-degree fold there,
+    and the hem turned in along it. Returns ((K, 2) int64 springs, (K,) rest lengths)."""
+    on_seam = np.zeros(len(uv), dtype=np.bool_)
+    on_seam[seams.ravel()] = True
+    st = springs[kind == STRUCTURAL]
+    r_st = rest[kind == STRUCTURAL]
+    nbrs: dict[int, list[tuple[int, float]]] = {}
+    for (i, j), r in zip(st.tolist(), r_st.tolist()):
+        nbrs.setdefault(i, []).append((j, r))
+        nbrs.setdefault(j, []).append((i, r))
+
+    def across(v: int) -> tuple[int, float] | None:
+        around = nbrs.get(v, [])
+        inner = [(u, r) for u, r in around if not on_seam[u]]
+        along = [u for u, _ in around if on_seam[u]]
+        if not inner or not along:
+            return None
+        t = uv[along[-1]] - uv[along[0]] if len(along) > 1 else uv[along[0]] - uv[v]
+        t = t / max(float(np.hypot(*t)), 1e-12)
+
+        def square(ur):
+            d = uv[ur[0]] - uv[v]
+            return abs(t[0] * d[1] - t[1] * d[0]) / max(float(np.hypot(*d)), 1e-12)
+
+        return max(inner, key=square)
+
+    out, out_rest = [], []
+    for a, b in seams.tolist():
+        fa, fb = across(a), across(b)
+        if fa is not None and fb is not None:
+            out.append((fa[0], fb[0]))
+            out_rest.append(fa[1] + fb[1])
+    return np.asarray(out, dtype=np.int64).reshape(-1, 2), np.asarray(out_rest, dtype=np.float64)
+
+
+def weld_model(model: ClothModel, vertex_map: np.ndarray, uv: np.ndarray | None = None) -> ClothModel:
     """Merge vertices (sewn seam pairs): vertex_map (N,) -> new index. Springs keep their rest
     lengths from the flat pattern; duplicates (a spring present on both panels) are merged into
     one with the longer rest length;
-    masses add up; seams are gone (they are now shared vertices)."""
+    masses add up; seams are gone (they are now shared vertices). With the flat pattern's uv
+    (N, 2), flexion springs across the seams are added (seam_flexion)."""
     n_new = int(vertex_map.max()) + 1
     mass = np.zeros(n_new)
     np.add.at(mass, vertex_map, model.mass)
@@ -260,6 +301,19 @@ def weld_model(model: ClothModel, vertex_map: np.ndarray) -> ClothModel:
     np.maximum.at(longest, group.ravel(), rest)
     order = np.argsort(first)
     first, longest = first[order], longest[order]
-    return _assemble(mass, s[first].astype(np.int32), longest, k[first], kind[first],
+    s, rest, k, kind = s[first], longest, k[first], kind[first]
+    if uv is not None and len(model.seams):
+        fs, fr = seam_flexion(uv, model.springs, model.kind, model.rest, model.seams)
+        fs = np.sort(vertex_map[fs], axis=1)
+        have = {tuple(p) for p in np.sort(s, axis=1).tolist()}
+        _, new = np.unique(fs, axis=0, return_index=True)  # one per welded pair, none doubling a spring
+        new = [i for i in sorted(new) if fs[i, 0] != fs[i, 1] and tuple(fs[i]) not in have]
+        if new:
+            fk = np.full(len(new), FLEXION, dtype=kind.dtype)
+            s = np.concatenate([s, fs[new].astype(s.dtype)])
+            rest = np.concatenate([rest, fr[new]])
+            kind = np.concatenate([kind, fk])
+            k = np.concatenate([k, spring_stiffness(fk, model.fabric, model.params, model.edge_length)])
+    return _assemble(mass, s.astype(np.int32), rest, k, kind,
                      vertex_map[model.quads].astype(np.int32), vertex_map[model.tris].astype(np.int32),
                      np.zeros((0, 2), np.int32), model.fabric, model.params, model.edge_length)

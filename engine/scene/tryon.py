@@ -155,6 +155,7 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
                    "guard_share": res.guard_share},
         "seam_gap_mm": {"max": res.seam_gap_max * 1000, "snapped": res.snapped},
         "shift_mm": {k: v * 1000 for k, v in shift.items()},
+        "sharp_folds": sharp_folds(res.positions, res.triangles),
         "kinetic_energy_j": res.kinetic_energy,
         "settled": bool(res.settled),
         "collision_maps": map_info,
@@ -229,6 +230,26 @@ def hang_shift(placed: np.ndarray, draped: np.ndarray) -> dict[str, float]:
     collapsed moves far more (a dress blown into a heap on one shoulder: hem +60 cm)."""
     return {"top": float(draped[:, 1].max() - placed[:, 1].max()),
             "hem": float(draped[:, 1].min() - placed[:, 1].min())}
+
+
+def sharp_folds(positions: np.ndarray, triangles: np.ndarray, degrees: float = 150.0) -> dict:
+    """Edges where the cloth folds back on itself: the normals of the two faces sharing an edge
+    more than `degrees` apart. A garment hanging in soft folds has few (measured at 1.5 cm: the
+    catalogue's skirts 0-4, dresses 1-10, shirts 0-21, trousers 51-159 at the crotch and the
+    gathered waist); a crumpled hem or a waistband turned over has many more (the sample skirt,
+    sewn without damping: 74-88 in 2 of 4 runs)."""
+    t = np.asarray(triangles, dtype=np.int64)
+    x = np.asarray(positions, dtype=np.float64)
+    n = np.cross(x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 0]])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+    e = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
+    face = np.tile(np.arange(len(t)), 3)
+    order = np.lexsort((e[:, 1], e[:, 0]))
+    e, face = e[order], face[order]
+    pair = np.flatnonzero(np.all(e[1:] == e[:-1], axis=1))  # an edge shared by two faces
+    cos = np.einsum("ij,ij->i", n[face[pair]], n[face[pair + 1]])
+    sharp = int((cos < np.cos(np.radians(degrees))).sum())
+    return {"count": sharp, "edges": int(len(pair)), "degrees": degrees}
 
 
 def hang_warnings(shift: dict[str, float]) -> list[str]:
