@@ -48,18 +48,23 @@ class DrapeOptions:
     # at one edge the last welds snapped pairs 11-13 mm apart together)
     sew_tau: float = 0.02  # s: a seam pair is pulled to close its gap in this time ...
     sew_vmax: float = 3.0  # m/s: ... at most this fast
-    sew_damping: float = 1000.0  # x the viscous damping while sewing, as while draping. Measured
-    # (sharp_folds, edges folded over > 150 degrees): the sample skirt -- flat panels placed 30 cm
-    # apart, side seams pulled shut at up to sew_vmax -- at 20 x swung on after welding, the hem
-    # flew up to the hips and stayed crumpled with the waistband askew in 2 of 4 runs whose
-    # vertices differed by 1e-9 cm (74-88 sharp edges; the good ones 9-16); at 1000 x (with
-    # seam_flexion) 0-29 over 8 runs, all hanging. The catalogue on both default bodies in M:
-    # 93k instead of 118k drape iterations for the ten, all settled, strain and penetration alike
+    sew_damping: float = 20.0  # x the viscous damping while sewing (no flapping) ...
+    far_sew_damping: float = 1000.0  # ... or this (as while draping) when the stitch pairs start a
+    far_gap: float = 0.2  # m: median of more than this apart: flat panels laid out around the
+    # body, as GarmentCode places them (the sample skirt: 30 cm; the catalogue's panels, wrapped
+    # round the body by landmarks: 0.4-12.7 cm). Measured with sharp_folds (edges folded over
+    # > 150 degrees): the sample skirt, its side seams pulled shut at up to sew_vmax, at 20 x swung
+    # on past welding, the hem flew up to the hips and stayed crumpled with the waistband askew in
+    # 2 of 4 runs whose vertices differed by 1e-9 cm (74-88 sharp edges; the good ones 9-16); zero
+    # velocities at the weld: 8-56; at 500 x: 5-17 over 4 runs, at 1000 x 0-29 over 8, all
+    # hanging. Not for every garment: at 500-1000 x the shirt's underarm seams on a scan with
+    # its arms 2.4 cm from the torso closed as loaded (instead of stalling, which raises the
+    # arms: engine.scene.arms), and the drape ended 7-17 % stretched between arm and torso
     sew_friction: float | None = None  # x the fabric's friction while sewing; None: 0 (the panels
     # slide over the body into place), or ARMS_CLOSE_SEW_FRICTION on a body whose arms hang close
     # to its torso (engine.scene.tryon.sewing_friction decides)
     seam_flexion: bool = True  # bending springs across the sewn seams (engine.cloth.model.seam_flexion;
-    # alone, at sew_damping 20, it did not keep the sample skirt's hem from crumpling)
+    # alone, at 20 x sewing damping, it did not keep the sample skirt's hem from crumpling)
     sew_gravity: float = 1.0  # x gravity while sewing (a flared skirt without gravity opens into a disc)
     drape_damping: float = 1000.0  # x the viscous damping while draping (a static result: settle;
     # measured on the skirt: 250 -> 14.9k-24k iterations, 1000 -> 13.3k, 3000 -> 24k: falls too slowly)
@@ -150,6 +155,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
         budget = int(np.ceil(o.sew_budget / dt))
         weld_gap = o.weld_gap if o.weld_gap is not None else 0.5 * _edge(garment)
         gap0 = float(seam_gaps(state.x, pairs, gaps).max())
+        sew_damping = o.far_sew_damping if float(np.median(gaps)) > o.far_gap else o.sew_damping
         check_every = max(1, int(0.005 / dt))
         observe = max(1, int(o.observe_every / dt))
         tri0 = _triangles(model) if observer is not None else None
@@ -161,7 +167,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
         gave_up = None  # (simulated s, smallest and largest open gap of the last snap_stall) when stuck
         for it in range(budget):
             g = g_sewn = o.sew_gravity * min(1.0, (it + 1) * dt / o.gravity_ramp)  # let the seams catch first
-            solver.step(state, gravity_scale=g, damping_scale=o.sew_damping, friction_scale=o.sew_friction or 0.0)
+            solver.step(state, gravity_scale=g, damping_scale=sew_damping, friction_scale=o.sew_friction or 0.0)
             hold_welds(state.x, state.v, model.mass, pairs, welded)
             if observer is not None and it % observe == 0:
                 observer("sewing", state.x, tri0, None)
