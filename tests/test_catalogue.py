@@ -324,6 +324,62 @@ def test_shoulder_seams_open_with_the_arms_close_are_sewn_again_with_the_arms_ra
         dress_in_size("dress", scan, "S", refusing(m.armpit_height + 0.1))
 
 
+def test_cloth_stretched_beside_close_arms_is_dressed_again_with_the_arms_raised(monkeypatch):
+    """The same body (arms 5.4 cm from the torso). A drape refused as too small, or reported
+    tight, whose most stretched cloth lies beside the arms is dressed again with the arms raised:
+    the refused one gives the raised drape; of two tight ones the less stretched is kept (the
+    other noted in the warnings). Stretched lower down (the hips) stays as it is. When the arms
+    cannot be raised, the refusal says where and still suggests a larger size. Stand-in drapes."""
+    import engine.scene.arms as arms
+    from engine.body.measure import measure
+    from engine.body.motion import _rot, pose_joints
+    from engine.body.rig import skin
+    from engine.body.types import Body
+    from engine.errors import SimulationError
+    from engine.scene.garments import dress_in_size
+
+    a_pose = resolve_body("default:female")
+    posed = skin(a_pose.vertices, a_pose.rig, pose_joints(a_pose.rig, {"upperarm01.L": _rot("z", -20.0),
+                                                                       "upperarm01.R": _rot("z", 20.0)}))
+    scan = Body(vertices=posed, faces=a_pose.faces, name="arms-down")
+    m = measure(scan)
+    shoulder, hips = m.armpit_height + 0.05, m.armpit_height - 0.4
+    asked = []
+
+    def drape(at_y, loaded_strain, raised_strain):
+        def dress(spec, place, name, lift=None):
+            asked.append(lift)
+            strain = raised_strain if lift is not None else loaded_strain
+            if strain > 0.15:
+                e = SimulationError(f"the garment is too small for this body: after draping it is stretched "
+                                    f"{100 * strain:.0f} % where cotton allows 5 %; try a larger size")
+                e.too_small, e.stretched_at = True, np.array([0.15, at_y, 0.0])
+                raise e
+            return ("raised" if lift is not None else "loaded"), {
+                "tight": strain > 0.06, "strain": {"max": strain, "at_m": [0.15, at_y, 0.0]}, "warnings": []}
+        return dress
+
+    res, rep = dress_in_size("shirt", scan, "M", drape(shoulder, 0.17, 0.059))  # refused -> raised
+    assert res == "raised" and asked[0] is None and asked[1].degrees == 20.0 and len(asked) == 2
+    asked.clear()
+    res, rep = dress_in_size("shirt", scan, "M", drape(shoulder, 0.08, 0.062))  # tight -> the raised, less
+    assert res == "raised" and len(asked) == 2
+    asked.clear()
+    res, rep = dress_in_size("shirt", scan, "M", drape(shoulder, 0.065, 0.09))  # ... or the loaded, noted
+    assert res == "loaded" and len(asked) == 2
+    assert "dressed with the arms raised 20 degrees" in rep["warnings"][0] and "9.0 %" in rep["warnings"][0]
+    asked.clear()
+    res, rep = dress_in_size("trousers", scan, "M", drape(hips, 0.08, 0.05))  # tight at the hips: kept
+    assert res == "loaded" and asked == [None] and rep["warnings"] == []
+    asked.clear()
+    monkeypatch.setattr(arms, "lift_arms", lambda body: None)
+    with pytest.raises(SimulationError) as err:
+        dress_in_size("shirt", scan, "M", drape(shoulder, 0.17, 0.05))
+    msg = str(err.value)
+    assert "stretched 17 % where cotton allows 5 %, beside the arms" in msg and "arms hang close" in msg
+    assert msg.endswith("or try a larger size") and err.value.too_small and asked == [None]
+
+
 def test_armholes_go_deeper_round_thick_arms():
     """The underarm point sits SCYE x height below the shoulder, or ARMHOLE_PER_ARM_ROOT x the
     arm root's cut below the body's armpit when that is lower (thick arms). The default bodies

@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from engine.cloth.fabrics import get_fabric
-from engine.cloth.model import ClothModel, ClothParams, ClothState, build_model, weld_model
+from engine.cloth.model import FLEXION, ClothModel, ClothParams, ClothState, build_model, weld_model
 from engine.cloth.solver import ClothSolver, Collider
 from engine.cloth.welds import hold_welds, merge_map, seam_gaps
 from engine.errors import SimulationError
@@ -327,11 +327,21 @@ def _edge(g: Garment) -> float:
     return float(np.median(np.linalg.norm(t[:, 1] - t[:, 0], axis=1)))
 
 
+def most_stretched(x: np.ndarray, model: ClothModel) -> tuple[float, np.ndarray]:
+    """(strain, midpoint (3,)) of the most stretched structural or shear spring."""
+    s = model.springs[model.kind != FLEXION]
+    r = model.rest[model.kind != FLEXION]
+    a, b = x[s[:, 0]], x[s[:, 1]]
+    k = int(np.argmax(np.linalg.norm(b - a, axis=1) / r))
+    return float(np.linalg.norm(b[k] - a[k]) / r[k] - 1.0), 0.5 * (a[k] + b[k])
+
+
 def _too_small(state: ClothState, model: ClothModel, strain: float, fabric, how: str) -> SimulationError:
     err = SimulationError(f"the garment is too small for this body: {how} {100 * strain:.0f} % where "
                           f"{fabric.name} allows {100 * fabric.strain_threshold:.0f} %; try a larger size")
     err.positions, err.triangles = state.x.copy(), _triangles(model)  # for a picture
     err.too_small = True  # (engine.scene.garments)
+    err.stretched_at = most_stretched(state.x, model)[1]  # (engine.scene.garments.arms_in_the_way)
     return err
 
 

@@ -52,26 +52,41 @@ def add_size_hint(err: Exception, arg: str, body: Body, size: str | None) -> Non
 AUTO_TRIES = 2  # --size auto: the recommended size and at most this many larger ones
 
 
-def arms_in_the_way(err: Exception, body: Body) -> bool:
-    """A sewing failure whose open seams start beside the arms (above 15 cm under the armpits:
-    over the shoulders, under the arms) on a body whose arms hang closer to the torso than
-    ARM_GAP_OK: rewrite the error to say so (a larger size will not help; the scan's pose will)
-    and mark it not `too_small`. True if so."""
-    top = getattr(err, "open_top", None)
-    if top is None:
-        return False
+def beside_the_arms(y: float, body: Body) -> bool:
+    """On a body whose arms hang closer to the torso than ARM_GAP_OK, is height y beside the arms
+    (above 15 cm under the armpits: over the shoulders, under the arms)?"""
     from engine.body.measure import ARM_GAP_BELOW, ARM_GAP_OK, measure
 
     m = measure(body)
-    if not (m.arm_gap < ARM_GAP_OK and top > m.armpit_height - ARM_GAP_BELOW - 0.05):
+    return bool(m.arm_gap < ARM_GAP_OK and y > m.armpit_height - ARM_GAP_BELOW - 0.05)
+
+
+def arms_in_the_way(err: Exception, body: Body) -> bool:
+    """A sewing failure whose open seams start beside the arms, or a drape refused as too small
+    whose most stretched cloth lies beside them, on a body whose arms hang close to the torso
+    (beside_the_arms): rewrite the error to say so and return True. A sewing failure is then
+    marked not `too_small` (a larger size will not help; the scan's pose will); a stretched one
+    may still be too small and keeps the size hint."""
+    from engine.body.measure import ARM_GAP_BELOW, ARM_GAP_OK, measure
+
+    top = getattr(err, "open_top", None)
+    at = getattr(err, "stretched_at", None)
+    y = top if top is not None else (float(at[1]) if at is not None else None)
+    if y is None or not beside_the_arms(y, body):
         return False
-    head = str(err).split(". The garment may be too small")[0]
-    err.args = (f"{head}. This body's arms hang close to its torso ({100 * m.arm_gap:.1f} cm away "
-                f"{100 * ARM_GAP_BELOW:.0f} cm below the armpits): the seams beside the arms are sewn "
-                f"reliably with the arms at least {100 * ARM_GAP_OK:.0f} cm away there (an A-pose, arms "
-                "about 45 degrees from the body), and a larger size will not help. Scan the body in "
-                "that pose, or try a skirt or trousers",) + tuple(err.args[1:])
-    err.too_small = False
+    m = measure(body)
+    pose = (f"This body's arms hang close to its torso ({100 * m.arm_gap:.1f} cm away {100 * ARM_GAP_BELOW:.0f} cm "
+            f"below the armpits): the seams beside the arms are sewn reliably with the arms at least "
+            f"{100 * ARM_GAP_OK:.0f} cm away there (an A-pose, arms about 45 degrees from the body)")
+    if top is not None:
+        head = str(err).split(". The garment may be too small")[0]
+        err.args = (f"{head}. {pose}, and a larger size will not help. Scan the body in that pose, or try a "
+                    "skirt or trousers",) + tuple(err.args[1:])
+        err.too_small = False
+    else:
+        head = str(err).split("; try a larger size")[0]
+        err.args = (f"{head}, beside the arms. {pose}. Scan the body in that pose, or try a larger size",) \
+            + tuple(err.args[1:])
     return True
 
 
@@ -87,8 +102,9 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
     When every size tried is too small, the least stretched tight result is returned (its
     warnings say so), or the last refusal raised. Other sizes and pattern files are dressed
     once; a too-small error then names the size auto would pick (add_size_hint). Seams beside
-    the arms that cannot close on a body whose arms hang close to its torso (arms_in_the_way):
-    the same size is dressed again with the arms raised and then lowered (engine.scene.arms),
+    the arms that cannot close on a body whose arms hang close to its torso, or cloth beside
+    them left too stretched (arms_in_the_way, beside_the_arms): the same size is dressed again
+    with the arms raised and then lowered (engine.scene.arms),
     and so are the larger sizes --size auto goes on to; if the arms cannot be raised, the
     try-on ends with that reason, in any size."""
     from engine.errors import SimulationError
@@ -97,27 +113,47 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
     lifted = []  # the ArmLift, once the arms were found in the way
 
     def attempt(resolve, label=lambda name: name):
-        """dress(*resolve(body)); with the arms raised when they are in the way."""
+        """dress(*resolve(body)); with the arms raised when they are in the way: seams beside
+        them that do not close, or cloth beside them left too stretched (refused, or tight: then
+        the less stretched of the two drapes is kept)."""
+        from engine.scene.arms import lift_arms
+
+        loaded = None  # a tight drape as loaded, stretched beside the arms
         if not lifted:
             spec, place, name = resolve(body)
             try:
-                return dress(spec, place, label(name))
+                loaded = dress(spec, place, label(name))
             except SimulationError as e:
                 if not arms_in_the_way(e, body):
                     raise
-                from engine.scene.arms import lift_arms
-
                 lift = lift_arms(body)
                 if lift is None:
                     raise
                 lifted.append(lift)
+            else:
+                at = loaded[1]["strain"].get("at_m")  # where it is most stretched
+                if not (loaded[1].get("tight") and at is not None and beside_the_arms(at[1], body)):
+                    return loaded
+                lift = lift_arms(body)
+                if lift is None:
+                    return loaded
+                lifted.append(lift)
         lift = lifted[0]
         spec, place, name = resolve(lift.raised)
         try:
-            return dress(spec, place, label(name), lift=lift)
+            res = dress(spec, place, label(name), lift=lift)
         except SimulationError as e:
+            if loaded is not None:
+                loaded[1]["warnings"].append(f"{lift.describe()} failed ({e}): this is the drape as loaded")
+                return loaded
             e.args = (f"{e} ({lift.describe()})",) + tuple(e.args[1:])
             raise
+        if loaded is not None and loaded[1]["strain"]["max"] <= res[1]["strain"]["max"]:
+            loaded[1]["warnings"].append(
+                f"{lift.describe()} came out more stretched ({100 * res[1]['strain']['max']:.1f} %): this is the "
+                "drape as loaded")
+            return loaded
+        return res
 
     if arg not in CATALOGUE or size != AUTO:
         try:

@@ -18,7 +18,7 @@ from engine.cloth.fabrics import get_fabric
 from engine.errors import InputError
 from engine.garment.garment import Garment, build_garment, spec_placement
 from engine.pattern.spec import PatternSpec
-from engine.scene.drape import DrapeOptions, DrapeResult, Progress, sew_and_drape
+from engine.scene.drape import DrapeOptions, DrapeResult, Progress, most_stretched, sew_and_drape
 
 
 @dataclass
@@ -152,7 +152,8 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
         # the guard holds strain at threshold + guard by moving positions (never into the body):
         # guard_share says how much of the fit it held in the end (0: none of the last steps)
         "strain": {"max": res.strain_max, "threshold": fab.strain_threshold, "guard": res.strain_guard,
-                   "guard_share": res.guard_share},
+                   "guard_share": res.guard_share,
+                   "at_m": [round(float(c), 4) for c in most_stretched(res.positions, res.model)[1]]},
         "seam_gap_mm": {"max": res.seam_gap_max * 1000, "snapped": res.snapped},
         "shift_mm": {k: v * 1000 for k, v in shift.items()},
         "sharp_folds": sharp_folds(res.positions, res.triangles),
