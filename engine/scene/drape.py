@@ -5,8 +5,10 @@ Stages end on measured conditions within a bounded budget of simulated time:
   `gravity_ramp` so the seams catch before the panels fall; each open stitch pair is given the
   relative velocity that closes it in `sew_tau` (a velocity modification, after the strain limit
   and before the collision response); a pair closer than `weld_gap` is welded (moves as one
-  point); when every pair is welded the sewn vertices are merged. If the budget runs out first,
-  SimulationError names the seams that stayed open and their gaps.
+  point); when every pair is welded the sewn vertices are merged, with flexion springs across
+  the seams (engine.cloth.model.seam_flexion). Panels laid out far apart (GarmentCode's flat
+  layout, `far_gap`) are sewn at the drape's damping, so they do not swing on when they meet.
+  If the budget runs out first, SimulationError names the seams that stayed open and their gaps.
 - drape: gravity (still growing where sewing ended before `gravity_ramp`) until the cloth's
   shape stops moving: RMS vertex displacement over each of the last two `settle_time` windows,
   as a speed, below `settle_speed` (tested every 1/SETTLE_CHECKS of a window, so a drape ends
