@@ -22,11 +22,14 @@ demo: setup
 	$(VENV)/tryon drape --body default:female --garment skirt --size M --out $(OUT)/skirt
 	@echo "demo: pictures in $(OUT)/"
 
+# Tests run in parallel processes (pytest-xdist: one per core, at most 4); `-n 0` in PYTEST_ARGS runs them in one.
+PYTEST_ARGS ?= -n auto --maxprocesses 4
+
 test: setup
-	$(VENV)/python -m pytest -m "not slow" -q
+	$(VENV)/python -m pytest -m "not slow" -q $(PYTEST_ARGS)
 
 test-slow: setup
-	$(VENV)/python -m pytest -m slow -q
+	$(VENV)/python -m pytest -m slow -q $(PYTEST_ARGS)
 
 bench: setup
 	$(VENV)/tryon bench --out out/bench
