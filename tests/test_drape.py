@@ -140,9 +140,9 @@ def test_a_garment_far_too_small_is_refused():
 
 def test_sewing_gives_up_when_the_seams_stop_closing():
     """A skirt far too small for the body (XS on default:male, coarse cloth): its side seams stop
-    closing 3-5 cm apart; sewing gives up after snap_after (2 s of simulated time), not at the
-    end of the 4 s budget, and says how far they stayed open and that the garment may be too
-    small."""
+    closing 3-5 cm apart; sewing gives up once they stalled for snap_stall after snap_after (2 s
+    of simulated time; measured: 2.0 s, 3.0 s since sewing starts calm), not at the end of the
+    4 s budget, and says how far they stayed open and that the garment may be too small."""
     from engine.body.default import default_body
     from engine.errors import SimulationError
     from engine.scene.garments import resolve_garment
@@ -150,7 +150,7 @@ def test_sewing_gives_up_when_the_seams_stop_closing():
 
     body = default_body("male")
     spec, place, name = resolve_garment("skirt", body, "XS")
-    with pytest.raises(SimulationError, match=r"^sewing stopped closing after 2.0 s of simulated time \(the widest "
+    with pytest.raises(SimulationError, match=r"^sewing stopped closing after [23].\d s of simulated time \(the widest "
                                               r"gap stayed \d+.\d-\d+.\d cm for 0.5 s\); open seams: front\[1\]-back\[4\] "
                                               r"\(\d+.\d cm\)\. The garment may be too small") as e:
         run_tryon(body, spec, h=0.03, place=place, source=name)
