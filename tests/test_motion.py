@@ -90,23 +90,26 @@ def test_feet_do_not_slide(track):
 
 
 def test_the_walk_starts_without_lurching_back(female, track):
-    """From rest, the pelvis never moves backward and its speed changes smoothly, and the foot
-    the body stands on in the ramp (the left: the walk starts at its mid-stance) does not slide.
-    Before, the right foot, swinging forward with its toe not yet lifted, was the lowest and
-    taken as the one stood on: the body slid back 5 cm over 3 frames (0.9 m/s) and lurched
-    forward, and the trousers' seat went 10 mm into the body in that frame. (That toe now
-    scuffs forward over the floor for those frames.)"""
+    """From rest, the pelvis does not move backward (under 2 cm/s: as the pose grows, the foot
+    stood on first moves forward under a millimetre a frame) and its speed changes smoothly;
+    the foot stood on in the ramp (the left: the walk starts at its mid-stance) does not slide,
+    and the swinging foot lifts rather than scuffs. Before, the right foot, swinging forward
+    with its toe pitched down below the left foot's sole, was the lowest and taken as the one
+    stood on: the body slid back 5 cm over 3 frames (0.9 m/s) and lurched forward, and the
+    trousers' seat went 10 mm into the body in that frame; standing on the left foot alone,
+    that toe scuffed forward over the floor at up to 1.4 m/s."""
     pelvis = female.segments == 1
     z = np.array([track.vertices(i)[pelvis, 2].mean() for i in range(track.cycle_start + track.cycle_frames)])
     v = np.diff(z) * track.fps  # m/s
-    assert v.min() >= 0.0, np.round(v, 2)
+    assert v.min() >= -0.02, np.round(v, 2)  # before: -0.88 m/s
     assert np.abs(np.diff(v)).max() * track.fps < 20.0, np.round(v, 2)  # m/s^2 (before: 45)
     left = female.vertices[:, 0] > 0
     for i in range(track.cycle_start):
         a, b = track.vertices(i), track.vertices(i + 1)
-        on = (a[:, 1] < 0.002) & (b[:, 1] < 0.002) & left
-        if on.any():
-            assert np.linalg.norm((b - a)[on][:, [0, 2]], axis=1).max() * track.fps < 0.1, i
+        on = (a[:, 1] < 0.002) & (b[:, 1] < 0.002)
+        slide = np.linalg.norm((b - a)[:, [0, 2]], axis=1) * track.fps
+        assert slide[on & left].max(initial=0.0) < 0.1, (i, slide[on & left].max())
+        assert slide[on].max(initial=0.0) < 0.2, (i, slide[on].max())  # the right foot lifting off
 
 
 def test_walk_speed_stride_and_period(female, track):

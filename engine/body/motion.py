@@ -43,6 +43,7 @@ from engine.errors import InputError
 from engine.jit import serial_kernel
 
 FINE = 16  # planting grid: steps per frame
+SWING_SPEED = 0.1  # m/s: a foot point moving forward faster than this (relative to the root) is not stood on
 START_PHASE = 0.3  # the walk starts at the left leg's mid-stance
 
 
@@ -161,6 +162,10 @@ def gait_deltas(phase: float, amp: float, weight: float) -> dict[str, np.ndarray
         ankle = 9.0 * _bump(p, 0.45, 0.12) - 17.0 * _bump(p, 0.63, 0.06) - 4.0 * _bump(p, 0.06, 0.04)
         out[f"upperleg01.{side}"] = _rot("x", -weight * hip)  # flexion: the thigh swings forward
         out[f"lowerleg01.{side}"] = _rot("x", weight * knee)  # flexion: the shank swings back
+        # the foot's pitch (toes up) from the leg's angles is weight * (hip - knee + ankle):
+        # ramping it as weight^2, like the lift that bending the leg gives, keeps a swinging foot's
+        # toe from dipping below the sole of the foot stood on at the start of the walk
+        ankle += (weight - 1.0) * (hip - knee + ankle)
         out[f"foot.{side}"] = _rot("x", -weight * ankle)  # dorsiflexion: toes up
         # the arm swings with the opposite leg: forward when that leg is forward
         q = (p + 0.5) % 1.0
@@ -274,17 +279,18 @@ class _Walker:
     def plant(self, t0: float, t1: float, steps: int, off0: np.ndarray):
         """Root offsets (steps+1, 3) (x, z planted; y the lift) from t0 to t1."""
         ts = np.linspace(t0, t1, steps + 1)
+        step = (t1 - t0) / max(steps, 1)
         offs = np.zeros((steps + 1, 3))
         offs[0] = off0
         prev = self.feet_at(ts[0])
         offs[0, 1] = -prev[:, 1].min()
         for k in range(1, steps + 1):
             cur = self.feet_at(ts[k])
-            # the point the body stands on: the lowest of those not moving forward. (At the
-            # start of the walk the foot swinging forward, its toe not yet lifted, was the
-            # lowest: the body slid back 5 cm over 3 frames, 0.9 m/s, then lurched forward.
-            # Now that toe drags forward over the floor for those frames, at up to 0.25 m/s.)
-            y = np.where(cur[:, 2] <= prev[:, 2], prev[:, 1], np.inf)
+            # the point the body stands on: the lowest of those not swinging forward (faster
+            # than SWING_SPEED relative to the root). (Taking the lowest of all, at the start of
+            # the walk the foot swinging forward, its toe not yet lifted, was stood on: the body
+            # slid back 5 cm over 3 frames, 0.9 m/s, then lurched forward.)
+            y = np.where(cur[:, 2] - prev[:, 2] <= SWING_SPEED * step, prev[:, 1], np.inf)
             c = int(np.argmin(y)) if np.isfinite(y).any() else int(np.argmin(prev[:, 1]))
             offs[k, 0] = offs[k - 1, 0] - (cur[c, 0] - prev[c, 0])
             offs[k, 2] = offs[k - 1, 2] - (cur[c, 2] - prev[c, 2])
