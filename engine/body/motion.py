@@ -19,13 +19,15 @@ The hip amplitude is scaled so that one cycle covers the asked stride.
 
 Feet planted, by construction: every pose is lifted so its lowest foot point touches y = 0 (no
 floating, no floor penetration; this is the pelvis bob), and the root moves horizontally so that
-the lowest foot point -- the one the body stands on -- keeps its place from one instant to the
-next (no sliding; computed on a grid 16x finer than the frames). Walking in place is a treadmill:
+the lowest foot point not swinging forward -- the one the body stands on -- keeps its place from
+one instant to the next (no sliding; computed on a grid 16x finer than the frames). Walking in place is a treadmill:
 the root stays put and the stance foot slides back at the walking speed.
 
 The walk starts from the rest pose (the pose the garment was draped on): the joint angles grow
 from 0 to full over `ramp` seconds (smoothstep) while the gait's clock speeds up from 0, starting
-at the left leg's mid-stance (so the first thing the body does is lift its right foot). After the ramp the motion is periodic; the
+at the left leg's mid-stance (so the first thing the body does is lift its right foot; the feet's
+pitch grows as the weight squared, like the lift bending the leg gives, so that foot's toe does not
+dip below the left sole). After the ramp the motion is periodic; the
 track stores the ramp frames and one cycle, relative to the root's horizontal offset, and
 repeats the cycle shifted by the stride -- so one cycle of collision maps serves the whole walk.
 """
