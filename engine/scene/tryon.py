@@ -236,9 +236,10 @@ def hang_shift(placed: np.ndarray, draped: np.ndarray) -> dict[str, float]:
 def sharp_folds(positions: np.ndarray, triangles: np.ndarray, degrees: float = 150.0) -> dict:
     """Edges where the cloth folds back on itself: the normals of the two faces sharing an edge
     more than `degrees` apart. Measured at 1.5 cm, M on both default bodies: the catalogue's
-    skirts 0, sleeveless shirts 0-1, dresses 3-11, shirts 31-39 (sleeves, armholes), trousers
-    97-165 (the crotch, the gathered waist); the sample skirt hanging 0-29, crumpled at the hem
-    with its waistband askew 74-88 (sewn at 20 x damping, 2 of 4 runs). Compare like garments."""
+    skirts 0, sleeveless shirts 2-12, dresses 1-14, shirts 21-23 (sleeves, armholes), trousers 0
+    (97-165 when they started stretched round the feet and crumpled); the sample skirt hanging
+    0-29, crumpled at the hem with its waistband askew 74-88 (sewn at 20 x damping, 2 of 4 runs).
+    Compare like garments."""
     import trimesh
 
     angles = trimesh.Trimesh(np.asarray(positions, dtype=np.float64), np.asarray(triangles), process=False,
