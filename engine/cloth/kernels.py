@@ -335,9 +335,10 @@ def _project_one(x, a, b, lmax, inv_mass, keep_out, contact, contact_n, max_move
     dx = x[b, 0] - x[a, 0]
     dy = x[b, 1] - x[a, 1]
     dz = x[b, 2] - x[a, 2]
-    length = np.sqrt(dx * dx + dy * dy + dz * dz)
-    if length <= lmax or length < 1e-12:
+    d2 = dx * dx + dy * dy + dz * dz
+    if d2 <= lmax * lmax or d2 < 1e-24:  # (no root for the springs within the limit: most of them)
         return False
+    length = np.sqrt(d2)
     wa, wb = inv_mass[a], inv_mass[b]
     corr = min(length - lmax, max_move) / (length * (wa + wb))
     ax, ay, az = wa * corr * dx, wa * corr * dy, wa * corr * dz
@@ -433,13 +434,17 @@ def point_average(a, quads, tris, out):
 
 
 @serial_kernel
-def collision_points(x, v, dt, quads, tris, p_out, pv_out):
-    """The checked points at their predicted positions x + dt v, and their velocities."""
-    point_average(x, quads, tris, p_out)
-    point_average(v, quads, tris, pv_out)
-    for p in range(p_out.shape[0]):
-        for c in range(3):
-            p_out[p, c] += dt * pv_out[p, c]
+def collision_points(x, v, dt, quads, tris, p_out):
+    """The checked points (vertices, quad midpoints, triangle centroids) at their predicted
+    positions: each the mean of its corners' x + dt v, in one pass."""
+    n = x.shape[0]
+    nq = quads.shape[0]
+    for p in range(n + nq + tris.shape[0]):
+        px, py, pz = _point_mean(x, p, n, nq, quads, tris)
+        vx, vy, vz = _point_mean(v, p, n, nq, quads, tris)
+        p_out[p, 0] = px + dt * vx
+        p_out[p, 1] = py + dt * vy
+        p_out[p, 2] = pz + dt * vz
 
 
 @njit(fastmath=True, cache=True, inline="always")

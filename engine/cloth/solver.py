@@ -61,7 +61,6 @@ class ClothSolver:
         self.body_v = np.zeros((n, 3))
         m = n + len(model.quads) + len(model.tris)
         self.points = np.zeros((m, 3))
-        self.point_v = np.zeros((m, 3))
         self.hit_buf = np.zeros(m, dtype=np.int32)  # work buffers of K.contact_rounds
         self.touched_buf = np.zeros(n, dtype=np.int32)
         self.ask_rows = np.zeros(m, dtype=np.int64)  # points to ask the collider alone (_contacts)
@@ -79,17 +78,18 @@ class ClothSolver:
              friction_scale: float = 1.0) -> None:
         m, p, dt = self.model, self.model.params, self.dt
         recover = max(self.recover, dt)  # work an excess off over at least one step (no overshoot)
+        g = self.gravity * gravity_scale
         t0 = time.perf_counter()
         # forces (eq. 2, gravity, damping, reaction eq. 16) and v += dt a (eq. 3); the same pass
         # lists the over-elongated springs for the velocity modification
         n_over = K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, m.springs, m.rest, m.stiffness,
-                                             m.spring_c, self.gravity * gravity_scale, p.damping * damping_scale,
+                                             m.spring_c, g, p.damping * damping_scale,
                                              self.contact, self.contact_n, m.fabric.friction * friction_scale, dt,
                                              self.f, self.active, m.fabric.strain_threshold, self.vm_work,
                                              self.vm_geo)
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 §3)
         n_act = K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
-                                    self.mode, self.gravity * gravity_scale, dt, self.body_v, p.vm_passes,
+                                    self.mode, g, dt, self.body_v, p.vm_passes,
                                     self.vm_work, self.vm_geo, recover, n_over)
         if self.sewing is not None:
             # sewing has priority over the strain limit (it stretches cloth near a seam by
@@ -101,13 +101,13 @@ class ClothSolver:
         # `collide_every` steps, the points predicted that many steps ahead; in between the
         # reaction force (eq. 16, in the force pass) keeps contacts from pressing in
         if self.collider is not None and self.iterations % p.collide_every == 0:
-            K.collision_points(state.x, state.v, dt * p.collide_every, m.quads, m.tris, self.points, self.point_v)
+            K.collision_points(state.x, state.v, dt * p.collide_every, m.quads, m.tris, self.points)
             status, normal, bvel, depth = self._contacts()
             # The body's push and the strain limit can disagree (a waistband sliding down the hips
             # is pushed outward while it may not stretch): alternate the two velocity changes a
             # few rounds on the same contacts -- this converges to "stop sliding" -- and end on the
             # collision response so nothing moves into the body.
-            self.last_hits = K.contact_rounds(state.v, m.springs, self.mode, self.gravity * gravity_scale, dt,
+            self.last_hits = K.contact_rounds(state.v, m.springs, self.mode, g, dt,
                                               p.vm_passes, self.vm_work, self.vm_geo, recover, n_act,
                                               p.contact_rounds, status, normal, bvel, depth, m.n, m.quads, m.tris,
                                               p.tolerance, p.reflection, m.fabric.friction * friction_scale,
