@@ -128,17 +128,43 @@ def test_cycle_repeats_shifted_by_the_stride(track):
 
 def test_velocities_match_the_motion(female):
     """The stored world velocities agree with central differences of the frames (at 120 fps:
-    at 30 fps the difference quotient itself is 0.09 m/s off where the pelvis speeds up)."""
+    at 30 fps the difference quotient itself is 0.09 m/s off where the pelvis speeds up), in
+    every frame of the cycle. Planting keeps the lowest foot point still, and where that point
+    jumps -- from one foot to the other at each heel strike, and from heel to ball as the heel
+    rises -- the root's velocity has a kink (at heel strike about 0.3 m/s forward and 0.4 m/s
+    up, engine.body.motion): a difference quotient across it is off by up to half of that, in at
+    most two frames per switch, four switches a cycle."""
     track = walk_track(female, WalkParams(), fps=120)
-    medians = []
-    for i in range(track.cycle_start + 2, track.cycle_start + track.cycle_frames, 3):
+    medians, kinks = [], 0
+    for i in range(track.cycle_start + 1, track.cycle_start + track.cycle_frames + 1):
         fd = (track.vertices(i + 1) - track.vertices(i - 1)) * track.fps / 2
         err = np.linalg.norm(fd - track.velocities(i), axis=1)
         medians.append(np.median(err))
-        assert np.percentile(err, 99) < 0.3, (i, np.percentile(err, 99))  # feet swing at 4-5 m/s
-    # the root's speed jumps by ~0.2 m/s where the weight passes to the other foot (planting keeps
-    # the lowest foot point still, and that point jumps from one foot to the other)
-    assert np.median(medians) < 0.01 and max(medians) < 0.3, (np.median(medians), max(medians))
+        kink = medians[-1] > 0.01
+        kinks += kink
+        # feet swing at 4-5 m/s
+        assert np.percentile(err, 99) < (0.5 if kink else 0.3), (i, np.percentile(err, 99))
+        assert medians[-1] < 0.3, (i, medians[-1])
+    assert kinks <= 8, (kinks, np.round(medians, 3))
+    assert np.median(medians) < 0.01, np.median(medians)
+
+
+def test_the_pelvis_keeps_an_even_pace(female, track):
+    """Over a cycle the pelvis moves forward at the walking speed +-20 % and up or down at under
+    0.45 m/s (frame to frame at 30 fps). Before the toe roll and the retiming of the gait's
+    clock (engine.body.motion.even_pace), 0.61 .. 1.98 m/s forward and down at up to 0.96 m/s
+    before each heel strike: the body surged and dropped twice a cycle."""
+    pelvis = female.segments == 1
+    c = np.array([track.vertices(i)[pelvis].mean(0)
+                  for i in range(track.cycle_start, track.cycle_start + track.cycle_frames + 1)])
+    v = np.diff(c, axis=0) * track.fps
+    assert 0.8 * 1.2 < v[:, 2].min() and v[:, 2].max() < 1.2 * 1.2, np.round(v[:, 2], 2)
+    assert np.abs(v[:, 1]).max() < 0.45, np.round(v[:, 1], 2)
+    # the cycle still covers the stride in the same time, and both feet share it evenly: the
+    # pelvis moves half a stride forward in each half of the cycle (+-10 %)
+    half = track.cycle_frames // 2
+    d1, d2 = c[half, 2] - c[0, 2], c[-1, 2] - c[half, 2]
+    assert abs(d1 - d2) < 0.1 * (d1 + d2) / 2, (d1, d2)
 
 
 def test_in_place_is_a_treadmill(female):
