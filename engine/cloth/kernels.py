@@ -586,6 +586,22 @@ def contact_rounds(v, springs, mode, gravity, dt, passes, work, geo, recover, n_
 
 
 @serial_kernel
+def hold_contacts(v, contact, contact_n, body_v):
+    """Between two collision checks: a vertex in contact at the last check may not move into the
+    body -- its velocity relative to the body's (as seen then) loses any part along the contact
+    normal pointing inward (what the velocity modification and the seams may have given it in
+    this step; the reaction force of eq. 16 only cancels forces)."""
+    for i in range(v.shape[0]):
+        if contact[i]:
+            nx, ny, nz = contact_n[i, 0], contact_n[i, 1], contact_n[i, 2]
+            vn = (v[i, 0] - body_v[i, 0]) * nx + (v[i, 1] - body_v[i, 1]) * ny + (v[i, 2] - body_v[i, 2]) * nz
+            if vn < 0.0:
+                v[i, 0] -= vn * nx
+                v[i, 1] -= vn * ny
+                v[i, 2] -= vn * nz
+
+
+@serial_kernel
 def integrate_positions(x, v, dt):
     """The position half of eq. 3: p += dt v."""
     for i in range(x.shape[0]):

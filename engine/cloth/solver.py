@@ -99,7 +99,8 @@ class ClothSolver:
         t1 = time.perf_counter()
         # collision detection and response (vertices and face midpoints, eq. 12/15) every
         # `collide_every` steps, the points predicted that many steps ahead; in between the
-        # reaction force (eq. 16, in the force pass) keeps contacts from pressing in
+        # reaction force (eq. 16, in the force pass) keeps contacts from pressing in, and
+        # hold_contacts keeps the strain limit and the seams from moving them in
         if self.collider is not None and self.iterations % p.collide_every == 0:
             K.collision_points(state.x, state.v, dt * p.collide_every, m.quads, m.tris, self.points)
             status, normal, bvel, depth = self._contacts()
@@ -113,6 +114,8 @@ class ClothSolver:
                                               p.tolerance, p.reflection, m.fabric.friction * friction_scale,
                                               self.contact, self.contact_n, self.body_v, self.hit_buf,
                                               self.touched_buf)
+        elif self.collider is not None:
+            K.hold_contacts(state.v, self.contact, self.contact_n, self.body_v)
         t2 = time.perf_counter()
         # positions (eq. 3); Provot's position modification when chosen as the comparison
         K.integrate_positions(state.x, state.v, dt)
