@@ -390,3 +390,21 @@ def test_walk_options_refuse_absurd_solver_settings(field, value, words):
     WalkOptions().validate()  # the defaults are valid
     with pytest.raises(InputError, match=words):
         WalkOptions(**{field: value}).validate()
+
+
+def test_collision_checks_keep_pace_with_the_body():
+    """By default the walk checks collisions as often as keeps the body's bulk travel between two
+    checks within CHECK_TRAVEL: every 8th step at a normal walk, more often when faster."""
+    from engine.body.default import default_body
+    from engine.body.motion import WalkParams, walk_track
+    from engine.scene.walk import CHECK_TRAVEL, MAX_CHECK_EVERY, check_every
+
+    body = default_body("female")
+    dt = 0.000115
+    got = {}
+    for speed in (1.2, 2.4, 3.6):
+        tr = walk_track(body, WalkParams(speed=speed), 30)
+        got[speed] = check_every(tr, dt)
+        bulk = float(np.linalg.norm(tr.vel.astype(np.float64).mean(axis=1), axis=1).max())
+        assert got[speed] * bulk * dt <= CHECK_TRAVEL or got[speed] == 1
+    assert got[1.2] == MAX_CHECK_EVERY and got[1.2] > got[2.4] > got[3.6] >= 1, got

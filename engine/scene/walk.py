@@ -31,6 +31,8 @@ from engine.scene.drape import DrapeResult, Progress
 
 RUNAWAY_STRAIN = 0.5  # a spring stretched 50 % past its rest length: the cloth is exploding
 FLY_OFF = 0.5  # m: a cloth vertex this far outside the body's bounding box has left it
+CHECK_TRAVEL = 0.00175  # m: the body's bulk travel between two collision checks (WalkOptions.collide_every)
+MAX_CHECK_EVERY = 8  # steps: collisions are checked at least this often
 
 
 @dataclass
@@ -48,16 +50,20 @@ class WalkOptions:
     # 12 passes 517 ms a frame, strain max 7.6 %, penetration max 1.5 mm; 6 passes 418 ms,
     # 7.7 %, 0.6 mm; 3 passes 388 ms, 8.4 %.
     vm_passes: int = 6
-    # Steps between collision checks (the points predicted that many steps ahead; the reaction
-    # force holds contacts in between). The eq. 4 step is set by the stiffest spring, not by
-    # contact: a point moving 1 m/s travels 0.46 mm in 4 steps of 0.115 ms, a tenth of the band.
-    # Measured on the dress (4374 vertices, 2 s): every step 503 ms a frame, penetration max
-    # 0.6 mm, strain 7.7 %; every 4 steps 311 ms, 1.7 mm, 6.4 %; every 8 steps (with 2 contact
-    # rounds, 4 s) 221 ms, 5.3 mm. In the steps between checks a vertex in contact may not move
-    # into the body (cloth.kernels.hold_contacts): without that the strain limit pulled the
-    # tight front of a walking dress into the bust, 4.15 mm deep and showing through (2.4 s on
-    # default:female, M; every 2nd step 1.0 mm, still showing); with it 0.63 mm, no slower.
-    collide_every: int = 4
+    # Steps between collision checks (the points predicted that many steps ahead; in between the
+    # reaction force holds contacts' forces and cloth.kernels.hold_contacts their velocities). The
+    # eq. 4 step is set by the stiffest spring, not by contact: a point moving 1 m/s travels
+    # 0.9 mm in 8 steps of 0.115 ms, a fifth of the band. Measured before hold_contacts on the
+    # dress (4374 vertices, 2 s): every step 503 ms a frame, penetration max 0.6 mm, strain 7.7 %;
+    # every 4 steps 311 ms, 1.7 mm, 6.4 %; every 8 steps (2 contact rounds, 4 s) 221 ms, 5.3 mm
+    # -- and at every 4, the strain limit pulled the tight front of the dress (default:female, M)
+    # 4.15 mm into the bust, showing through (every 2nd step: 1.0 mm, still showing). With
+    # hold_contacts, 4 s on default:female, M, every 4 -> every 8 steps: dress 0.72 -> 1.20 mm,
+    # trousers 2.32 -> 3.08, skirt 0.89 -> 0.85, shirt 1.80 -> 1.78 (p99 0 throughout), strain
+    # max 7.1-7.8 % either way; the dress 277 -> 212 ms a frame (one process, same machine). At
+    # 3.6 m/s every 8 steps left p99 at 3.4 mm: None (the default) checks as often as keeps the
+    # body's bulk travel between checks within CHECK_TRAVEL (8 steps at 1.2 m/s, 3 at 3.6)
+    collide_every: int | None = None
     # Alternations of strain limit and collision response per check (the drape uses 4).
     # Measured on the dress, 4 s: 4 rounds 195 ms a frame, penetration max 3.0 mm, strain
     # 7.3 %; 2 rounds 152 ms, 3.4 mm, 7.3 %; 1 round 140 ms, 3.8 mm, 7.7 %.
@@ -80,7 +86,7 @@ class WalkOptions:
             raise InputError(f"strain_guard {self.strain_guard}: use 0 .. 0.5 (or None: off)")
         if not (1 <= self.contact_rounds <= 16):
             raise InputError(f"contact_rounds {self.contact_rounds}: use 1 .. 16")
-        if not (1 <= self.collide_every <= 16):
+        if self.collide_every is not None and not (1 <= self.collide_every <= 16):
             raise InputError(f"collide_every {self.collide_every}: check collisions every 1 .. 16 steps")
         if not (0.0 <= self.friction <= 2.0):
             raise InputError(f"friction scale {self.friction}: use 0 .. 2")
@@ -92,6 +98,13 @@ class WalkOptions:
         if self.velocity_mode is not None and self.velocity_mode not in VM_MODES:
             raise InputError(f"unknown velocity modification '{self.velocity_mode}'; "
                              f"choose one of: {', '.join(VM_MODES)}")
+
+
+def check_every(track: BodyTrack, dt: float) -> int:
+    """Solver steps between collision checks while walking: as many as keep the body's bulk
+    travel (its vertices' mean velocity, fastest frame) within CHECK_TRAVEL, 1 .. MAX_CHECK_EVERY."""
+    bulk = float(np.linalg.norm(track.vel.astype(np.float64).mean(axis=1), axis=1).max())
+    return int(np.clip(CHECK_TRAVEL // max(bulk * dt, 1e-12), 1, MAX_CHECK_EVERY))
 
 
 @dataclass
@@ -181,13 +194,14 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
     model = drape.model
     from dataclasses import replace
 
-    model = replace(model, params=replace(model.params, vm_passes=o.vm_passes, collide_every=o.collide_every,
-                                         contact_rounds=o.contact_rounds, strain_guard=o.strain_guard))
-    if o.velocity_mode is not None:
-        model = replace(model, params=replace(model.params, velocity_mode=o.velocity_mode))
     frame_time = 1.0 / track.fps
     sub = max(1, math.ceil(frame_time / drape.dt - 1e-9))
     dt = frame_time / sub
+    every = o.collide_every if o.collide_every is not None else check_every(track, dt)
+    model = replace(model, params=replace(model.params, vm_passes=o.vm_passes, collide_every=every,
+                                         contact_rounds=o.contact_rounds, strain_guard=o.strain_guard))
+    if o.velocity_mode is not None:
+        model = replace(model, params=replace(model.params, velocity_mode=o.velocity_mode))
     solver = ClothSolver(model, collider, dt=dt)
     state = ClothState(drape.state.x.copy(), drape.state.v.copy())
     frames = np.empty((n_frames + 1, model.n, 3), np.float32)
@@ -244,7 +258,7 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
     pmax, p99 = float(pooled.max()) * 1000, float(np.percentile(pooled, 99)) * 1000
     report = {
         "frames": n_frames, "fps": track.fps, "seconds": sim_seconds, "substeps_per_frame": sub, "dt_ms": dt * 1000,
-        "collision_every_steps": o.collide_every,
+        "collision_every_steps": every,
         "contact_rounds": o.contact_rounds,
         "strain_guard": o.strain_guard,
         "velocity_mode": model.params.velocity_mode,
