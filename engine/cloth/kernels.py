@@ -335,10 +335,9 @@ def _project_one(x, a, b, lmax, inv_mass, keep_out, contact, contact_n, max_move
     dx = x[b, 0] - x[a, 0]
     dy = x[b, 1] - x[a, 1]
     dz = x[b, 2] - x[a, 2]
-    d2 = dx * dx + dy * dy + dz * dz
-    if d2 <= lmax * lmax or d2 < 1e-24:  # (no root for the springs within the limit: most of them)
+    length = np.sqrt(dx * dx + dy * dy + dz * dz)
+    if length <= lmax or length < 1e-12:
         return False
-    length = np.sqrt(d2)
     wa, wb = inv_mass[a], inv_mass[b]
     corr = min(length - lmax, max_move) / (length * (wa + wb))
     ax, ay, az = wa * corr * dx, wa * corr * dy, wa * corr * dz
