@@ -308,8 +308,8 @@ class _Walker:
     def even_pace(self, samples: int, strength: float) -> None:
         """Retime the gait so the body's forward speed varies less: planted as it is, the root
         moves forward D(phase), unevenly (the joint curves are not exactly consistent with
-        planted feet -- measured on the default bodies, 0.6 .. 2.0 m/s within each step at
-        1.2 m/s without the toe roll, 0.75 .. 1.6 with it); the clock spends time on each part of the cycle in
+        planted feet -- measured on the default bodies at 1.2 m/s, 0.9 .. 1.6 m/s within each
+        step); the clock spends time on each part of the cycle in
         proportion to D'(phase)^strength, so the root moves at a speed that goes as
         D'^(1 - strength) -- the poses, and so the planted feet, are the same, only reached at
         other times (the joints' pace then varies instead, as D'^-strength)."""
