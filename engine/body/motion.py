@@ -47,7 +47,7 @@ repeats the cycle shifted by the stride -- so one cycle of collision maps serves
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -189,8 +189,9 @@ def gait_deltas(phase: float, amp: float, weight: float) -> dict[str, np.ndarray
         # ball of the foot rather than over the toe tips
         heel_up = max(0.0, weight * (knee - hip - ankle))  # the foot's pitch, toes down
         hold = 1.0 if p <= TOE_OFF else max(0.0, 1.0 - (p - TOE_OFF) / TOE_EASE)
+        toes = _rot("x", -heel_up * hold)
         for toe in TOES:
-            out[f"{toe}.{side}"] = _rot("x", -heel_up * hold)
+            out[f"{toe}.{side}"] = toes
         # the arm swings with the opposite leg: forward when that leg is forward
         q = (p + 0.5) % 1.0
         cq = math.cos(2 * math.pi * q)
@@ -315,7 +316,7 @@ class _Walker:
         other times (the joints' pace then varies instead, as D'^-strength)."""
         self.pace = None
         keep = self.p
-        self.p = WalkParams(speed=keep.speed, stride=keep.stride, in_place=keep.in_place, ramp=0.0)
+        self.p = replace(keep, ramp=0.0)  # the clock from 0 at START_PHASE: one cycle
         _, offs = self.plant(0.0, self.period, samples, np.zeros(3))
         self.p = keep
         d = np.maximum(np.diff(offs[:, 2]), 1e-9) ** strength

@@ -103,7 +103,7 @@ class WalkOptions:
 def check_every(track: BodyTrack, dt: float) -> int:
     """Solver steps between collision checks while walking: as many as keep the body's bulk
     travel (its vertices' mean velocity, fastest frame) within CHECK_TRAVEL, 1 .. MAX_CHECK_EVERY."""
-    bulk = float(np.linalg.norm(track.vel.astype(np.float64).mean(axis=1), axis=1).max())
+    bulk = float(np.linalg.norm(track.vel.mean(axis=1, dtype=np.float64), axis=1).max())
     return int(np.clip(CHECK_TRAVEL // max(bulk * dt, 1e-12), 1, MAX_CHECK_EVERY))
 
 
