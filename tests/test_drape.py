@@ -184,9 +184,10 @@ def test_a_dress_on_a_scan_with_the_arms_closer_is_sewn_with_friction(tmp_path):
     below the armpits). Sewn without friction, the dress's straps slid off the shoulders and it
     fell to the hips (a shoulder seam 15 cm open, in every size); friction while sewing
     (engine.scene.tryon.ARMS_CLOSE_SEW_FRICTION) holds them: the dress is on the shoulders
-    (its top within 6 cm of where it was placed) to the issue's quality. Its last two shoulder
-    pairs stop closing 1.3 cm apart and are welded there (seam_gap_mm.snapped; the default
-    bodies' welds close within 1 cm)."""
+    (its top within 6 cm of where it was placed) to the issue's quality. Its last shoulder pairs
+    close slowly: on one machine they stopped 1.3 cm apart and were welded there
+    (seam_gap_mm.snapped), on another (same code, same packages) they closed to 7.5 mm and were
+    welded as usual -- either way within 2 cm (the default bodies' welds close within 1 cm)."""
     from engine.body import resolve_body
     from engine.scene.garments import resolve_garment
     from engine.scene.tryon import ARMS_CLOSE_SEW_FRICTION, run_tryon
@@ -199,8 +200,8 @@ def test_a_dress_on_a_scan_with_the_arms_closer_is_sewn_with_friction(tmp_path):
     assert rep["penetration_mm"]["max"] <= 3.0 and rep["penetration_mm"]["p99"] <= 1.0, rep["penetration_mm"]
     assert rep["strain"]["max"] <= rep["strain"]["threshold"] + 0.01, rep["strain"]
     assert rep["settled"] and rep["cloth_vertices"] < rep["cloth_vertices_unsewn"]
-    # the last shoulder pairs stall and are welded where they are (DrapeOptions.snap_gap)
-    assert rep["seam_gap_mm"]["snapped"] >= 1 and rep["seam_gap_mm"]["max"] <= 20.0, rep["seam_gap_mm"]
+    # the last shoulder pairs close, or stall and are welded where they are (DrapeOptions.snap_gap)
+    assert rep["seam_gap_mm"]["max"] <= 20.0, rep["seam_gap_mm"]
     assert rep["shift_mm"]["top"] > -60.0, rep["shift_mm"]  # on the shoulders (fallen: -400)
 
 

@@ -631,3 +631,33 @@ def max_strain(x, springs, rest, active):
             strain = d / rest[s] - 1.0
         best = max(best, strain)
     return best if best > -np.inf else 0.0
+
+
+@serial_kernel
+def fire_mix(f, v, x, dt, alpha):
+    """One FIRE velocity step after a solver step (see engine.cloth.solver.FireRelaxer): the
+    power P = sum f.v; when P > 0, v <- (1 - alpha) v + alpha |v| f / |f| (all vertices as one
+    vector), else the positions go back half the step just taken (x -= dt v / 2, FIRE 2.0) and
+    every velocity is zeroed. Returns P."""
+    p = 0.0
+    vv = 0.0
+    ff = 0.0
+    for i in range(v.shape[0]):
+        for c in range(3):
+            p += f[i, c] * v[i, c]
+            vv += v[i, c] * v[i, c]
+            ff += f[i, c] * f[i, c]
+    if p > 0.0:
+        if ff > 0.0:
+            a = 1.0 - alpha
+            b = alpha * np.sqrt(vv / ff)
+            for i in range(v.shape[0]):
+                for c in range(3):
+                    v[i, c] = a * v[i, c] + b * f[i, c]
+    else:
+        h = 0.5 * dt
+        for i in range(v.shape[0]):
+            for c in range(3):
+                x[i, c] -= h * v[i, c]
+                v[i, c] = 0.0
+    return p
