@@ -234,29 +234,64 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
         return {"id": row["id"], "name": row["name"], "info": json.loads(row["info"] or "{}")}
 
     @app.post("/api/garments", status_code=201)
-    async def upload_garment(file: UploadFile = File(...), who: str = Depends(owner)):
+    async def upload_garment(file: UploadFile = File(..., description="a GarmentCode JSON specification, or a DXF "
+                                                     "of the pattern pieces (ASTM D6673 / AAMA, or closed polylines)"),
+                             assembly: UploadFile | None = File(None, description="with a DXF: its assembly "
+                                                                   "JSON (stitches by panel and edge number, "
+                                                                   "placement; see `tryon pattern import`)"),
+                             units: str | None = Form(None, description="with a DXF that does not say: mm, cm, "
+                                                         "m or in"),
+                             who: str = Depends(owner)):
         from engine.errors import TryonError
-        from engine.pattern.io import parse_pattern
+        from engine.pattern.io import parse_pattern, save_pattern
         from engine.pattern.validate import check
 
         suffix = Path(file.filename or "").suffix.lower()
-        if suffix == ".dxf":
-            raise HTTPException(400, "a DXF holds the pieces but no seams or placement: turn it into a GarmentCode "
-                                "pattern with its assembly file first (tryon pattern import PIECES.dxf --assembly "
-                                "ASSEMBLY.json) and upload the pattern.json")
-        if suffix != ".json":
-            raise HTTPException(400, "a pattern is a GarmentCode JSON specification (.json)")
+        if suffix not in (".json", ".dxf"):
+            raise HTTPException(400, "a pattern is a GarmentCode JSON specification (.json) or a DXF of its pieces "
+                                "(.dxf, with its assembly file)")
+        if suffix == ".dxf" and (assembly is None or not assembly.filename):
+            raise HTTPException(400, "a DXF holds the pieces but no seams or placement: upload its assembly file "
+                                "with it (field 'assembly': stitches by panel and edge number, each panel's "
+                                "translation and rotation -- `tryon pattern import PIECES.dxf` draws the pieces "
+                                "with every edge numbered)")
+        if suffix == ".json" and assembly is not None and assembly.filename:
+            raise HTTPException(400, "an assembly file goes with a DXF; a GarmentCode pattern has its stitches "
+                                "and placement already")
         gid = new_id()
         dest = s.data_dir / "uploads" / f"pattern-{gid}.json"
-        await save_upload(file, dest)
+        source = file.filename or "pattern"
+        notes: list[str] = []
+        sources = []  # the uploaded DXF and its assembly, removed once converted
         try:
-            spec = parse_pattern(dest.read_bytes(), source=file.filename or "pattern")
-            warnings = [str(p) for p in check(spec, source=file.filename or "pattern")]
+            if suffix == ".dxf":
+                from engine.pattern.dxf import import_dxf, load_assembly
+
+                dxf = s.data_dir / "uploads" / f"pattern-{gid}.dxf"
+                asm = s.data_dir / "uploads" / f"pattern-{gid}-assembly.json"
+                sources = [dxf, asm]
+                await save_upload(file, dxf)
+                await save_upload(assembly, asm)
+                try:
+                    spec, notes = import_dxf(dxf, load_assembly(asm), units)
+                except TryonError as e:  # name the client's files, not ours
+                    msg = str(e).replace(dxf.name, source).replace(asm.name, assembly.filename)
+                    raise type(e)(msg.replace("--units", "the 'units' field")) from None
+                problems = check(spec, source=source)
+                save_pattern(spec, dest)
+            else:
+                await save_upload(file, dest)
+                spec = parse_pattern(dest.read_bytes(), source=source)
+                problems = check(spec, source=source)
         except TryonError as e:
             dest.unlink(missing_ok=True)
             raise HTTPException(400, str(e)) from None
-        name = Path(file.filename or "pattern").stem[:80]
-        info = {"panels": len(spec.pattern.panels), "warnings": warnings}
+        finally:
+            for f in sources:
+                f.unlink(missing_ok=True)
+        name = Path(source).stem[:80]
+        info = {"panels": len(spec.pattern.panels), "warnings": [str(p) for p in problems],
+                **({"notes": notes, "from": "dxf"} if suffix == ".dxf" else {})}
         db.run("INSERT INTO garments VALUES (?,?,?,?,?,?)", gid, who, str(dest), name, time.time(), json.dumps(info))
         return garment_out(db.one("SELECT * FROM garments WHERE id=?", gid))
 

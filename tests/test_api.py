@@ -86,6 +86,49 @@ def test_upload_body_and_pattern(idle):
     assert len(g["uploaded"]) == 1
 
 
+def test_upload_a_dxf_pattern_with_its_assembly(idle, tmp_path):
+    """A shop's DXF cutting pattern and its assembly file (stitches, placement) become a pattern
+    the try-on can use; the uploads are converted to GarmentCode JSON and not kept. Without the
+    assembly, with a damaged DXF or a bad assembly: a clear 400 naming the client's file."""
+    import json
+
+    from engine.pattern.dxf import assembly_of, write_dxf
+    from engine.pattern.io import load_pattern, parse_pattern
+
+    h = token(idle)
+    spec = load_pattern(SAMPLE_SKIRT)
+    write_dxf(spec, tmp_path / "skirt.dxf")
+    asm = json.dumps(assembly_of(spec)).encode()
+    dxf = (tmp_path / "skirt.dxf").read_bytes()
+    r = idle.post("/api/garments", files={"file": ("My Skirt.dxf", dxf), "assembly": ("skirt-assembly.json", asm)},
+                  headers=h)
+    assert r.status_code == 201, r.text
+    g = r.json()
+    assert g["name"] == "My Skirt" and g["info"]["from"] == "dxf"
+    assert g["info"]["panels"] == len(spec.pattern.panels)
+    uploads = idle.app.state.settings.data_dir / "uploads"
+    assert [p.name for p in uploads.iterdir()] == [f"pattern-{g['id']}.json"]
+    back = parse_pattern((uploads / f"pattern-{g['id']}.json").read_bytes(), source="stored")
+    assert list(back.pattern.panels) == list(spec.pattern.panels)
+    assert len(back.pattern.stitches) == len(spec.pattern.stitches)
+    bid = idle.post("/api/bodies/default", json={"preset": "female"}, headers=h).json()["id"]
+    r = idle.post("/api/tryons", json={"body_id": bid, "garment": g["id"]}, headers=h)
+    assert r.status_code == 202 and r.json()["request"]["garment"]["label"] == "My Skirt", r.text
+
+    r = idle.post("/api/garments", files={"file": ("skirt.dxf", dxf)}, headers=h)
+    assert r.status_code == 400 and "assembly" in r.json()["error"], r.text
+    r = idle.post("/api/garments", files={"file": ("broken.dxf", b"0\nSECTION\n2\nENTITIES\n"),
+                                          "assembly": ("a.json", asm)}, headers=h)
+    assert r.status_code == 400 and "broken.dxf" in r.json()["error"] and "pattern-" not in r.json()["error"], r.text
+    r = idle.post("/api/garments", files={"file": ("skirt.dxf", dxf), "assembly": ("a.json", b'{"stitches": 3}')},
+                  headers=h)
+    assert r.status_code == 400 and "a.json" in r.json()["error"] and "invalid assembly" in r.json()["error"], r.text
+    r = idle.post("/api/garments", files={"file": ("skirt.json", SAMPLE_SKIRT.read_bytes()),
+                                          "assembly": ("a.json", asm)}, headers=h)
+    assert r.status_code == 400 and "DXF" in r.json()["error"], r.text
+    assert [p.name for p in uploads.iterdir()] == [f"pattern-{g['id']}.json"]  # nothing left of the refused
+
+
 def test_upload_says_what_the_loader_and_the_measurements_found(idle, tmp_path):
     """A scan's notes come back with the upload: the loader's (units, axes) and the
     measurements' (arms held too close to the torso for tops), before anything is dressed."""

@@ -138,6 +138,42 @@ def test_a_garment_far_too_small_is_refused():
     assert e.value.too_small and e.value.positions.shape[1] == 3
 
 
+@pytest.mark.parametrize("preset", ["female", "male"])
+def test_a_garmentcode_pattern_is_placed_round_a_default_body(preset):
+    """GarmentCode places panels round its bodies standing Y up, facing +Z -- our world's
+    conventions. The default bodies are built from ANNY's Z-up data (their to_world turns the
+    axes), so the sample skirt is placed in the world frame: round the hips, front panels in front
+    (through ANNY's map it landed 0.6-1.2 m behind the body and fell to the floor)."""
+    from engine.body import resolve_body
+    from engine.garment.garment import build_garment, spec_placement
+    from engine.pattern.io import load_pattern
+
+    body = resolve_body(f"default:{preset}")
+    spec = load_pattern(SAMPLE_SKIRT)
+    g = build_garment(spec, h=0.03, place=spec_placement(spec, body.to_world))
+    x = g.positions
+    assert np.abs(x[:, [0, 2]]).max() < 0.6  # round the body's axis
+    assert 0.45 < x[:, 1].min() and x[:, 1].max() < 1.15  # between the knees and the waist
+    front = np.isin(g.panel, [g.panel_names.index("skirt_front"), g.panel_names.index("wb_front")])
+    assert x[front, 2].mean() > 0.05 and x[~front, 2].mean() < -0.05
+
+
+def test_a_garment_that_falls_off_the_body_is_refused():
+    """A pattern placed beside the body (the sample skirt moved 1 m to the side) falls past the
+    feet: a clear error, not a result with a warning that it slid 27 m down."""
+    from engine.body import resolve_body
+    from engine.errors import SimulationError
+    from engine.pattern.io import load_pattern
+    from engine.scene.tryon import run_tryon
+
+    spec = load_pattern(SAMPLE_SKIRT)
+    for p in spec.pattern.panels.values():
+        p.translation = [p.translation[0] + 100.0, p.translation[1], p.translation[2]]  # cm
+    with pytest.raises(SimulationError, match=r"fell off the body .* far too large for this body, or its pattern "
+                                              r"places it away from the body"):
+        run_tryon(resolve_body("default:female"), spec, h=0.03)
+
+
 def test_sewing_gives_up_when_the_seams_stop_closing():
     """A skirt far too small for the body (XS on default:male, coarse cloth): its side seams stop
     closing 3-5 cm apart; sewing gives up once they stalled for snap_stall after snap_after (2 s

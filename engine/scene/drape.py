@@ -35,6 +35,7 @@ from engine.cloth.welds import hold_welds, merge_map, seam_gaps
 from engine.errors import InputError, SimulationError
 from engine.garment.garment import Garment
 
+FELL_BELOW = -0.05  # m: cloth wholly below this height has fallen off the body (feet stand on y = 0)
 SETTLE_CHECKS = 5  # the settle test runs this many times a window (on the two windows just ended)
 Progress = Callable[[str, float, str], None]  # (stage, fraction 0..1, message)
 # (stage, cloth positions (N, 3), triangles (F, 3), body vertices (M, 3) or None when unchanged):
@@ -390,6 +391,10 @@ def _check_finite(state: ClothState, stage: str) -> None:
     if not (np.all(np.isfinite(state.x)) and np.all(np.isfinite(state.v))):
         raise SimulationError(f"the cloth became unstable while {stage} (non-finite positions); "
                               "use a smaller time step or a softer fabric")
+    if state.x[:, 1].max() < FELL_BELOW:
+        raise SimulationError(f"the garment fell off the body while {stage} (all of it below the feet): it is far "
+                              "too large for this body, or its pattern places it away from the body; try a "
+                              "smaller size, or check the panels' translation")
     if np.abs(state.x).max() > 100.0:
         raise SimulationError(f"the cloth flew off while {stage} (a vertex is more than 100 m away); "
                               "use a smaller time step")
