@@ -131,15 +131,28 @@ def build_springs(uv: np.ndarray, panel: np.ndarray, lattice: np.ndarray, quads:
     shear = _unique_pairs(np.concatenate([quads[:, [0, 2]], quads[:, [1, 3]]]))
     # flexion on the grid: (i, j) - (i + 2, j) and (i, j) - (i, j + 2), same panel, middle present
     on = np.flatnonzero(lattice[:, 0] >= 0)
-    key = {(int(panel[v]), int(lattice[v, 0]), int(lattice[v, 1])): int(v) for v in on}
     flex = []
-    for v in on:
-        p, i, j = int(panel[v]), int(lattice[v, 0]), int(lattice[v, 1])
-        for di, dj in ((1, 0), (0, 1)):
-            mid = key.get((p, i + di, j + dj))
-            far = key.get((p, i + 2 * di, j + 2 * dj))
-            if mid is not None and far is not None:
-                flex.append((v, far))
+    if len(on):
+        lat = lattice[on].astype(np.int64)
+        lo = lat.min(axis=0)
+        span = lat.max(axis=0) - lo + 3  # room for i + 2, j + 2
+
+        def code(pp, ij):
+            return (pp * span[0] + (ij[:, 0] - lo[0])) * span[1] + (ij[:, 1] - lo[1])
+
+        pan = panel[on].astype(np.int64)
+        keys = code(pan, lat)
+        order = np.argsort(keys)
+        sk = keys[order]
+
+        def find(c):  # vertex with code c, or -1
+            k = np.minimum(np.searchsorted(sk, c), len(sk) - 1)
+            return np.where(sk[k] == c, on[order[k]], -1)
+
+        for d in (np.array([1, 0]), np.array([0, 1])):
+            mid, far = find(code(pan, lat + d)), find(code(pan, lat + 2 * d))
+            ok = (mid >= 0) & (far >= 0)
+            flex += list(zip(on[ok].tolist(), far[ok].tolist()))
     # flexion across the band's triangle edges: the two vertices opposite a shared edge
     if len(tris):
         te = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
@@ -153,8 +166,9 @@ def build_springs(uv: np.ndarray, panel: np.ndarray, lattice: np.ndarray, quads:
     flex = _unique_pairs(np.asarray(flex, dtype=np.int64).reshape(-1, 2)) if flex else np.zeros((0, 2), np.int64)
     # a structural/shear pair is not also a flexion spring
     if len(flex):
-        taken = {tuple(p) for p in np.concatenate([structural, shear]).tolist()}
-        flex = np.asarray([p for p in flex.tolist() if tuple(p) not in taken], dtype=np.int64).reshape(-1, 2)
+        n = int(max(flex.max(), structural.max(initial=0), shear.max(initial=0))) + 1
+        taken = np.concatenate([structural, shear]).astype(np.int64)
+        flex = flex[~np.isin(flex[:, 0] * n + flex[:, 1], taken[:, 0] * n + taken[:, 1])].reshape(-1, 2)
     springs = np.concatenate([structural, shear, flex]).astype(np.int32)
     kind = np.concatenate([np.full(len(structural), STRUCTURAL), np.full(len(shear), SHEAR),
                            np.full(len(flex), FLEXION)]).astype(np.int8)
@@ -305,10 +319,12 @@ def weld_model(model: ClothModel, vertex_map: np.ndarray, uv: np.ndarray | None 
     if uv is not None and len(model.seams):
         fs, fr = seam_flexion(uv, model.springs, model.kind, model.rest, model.seams)
         fs = np.sort(vertex_map[fs], axis=1)
-        have = {tuple(p) for p in np.sort(s, axis=1).tolist()}
+        have = np.sort(s, axis=1).astype(np.int64)
         _, new = np.unique(fs, axis=0, return_index=True)  # one per welded pair, none doubling a spring
-        new = [i for i in sorted(new) if fs[i, 0] != fs[i, 1] and tuple(fs[i]) not in have]
-        if new:
+        new = np.sort(new)
+        f64 = fs[new].astype(np.int64)
+        new = new[(f64[:, 0] != f64[:, 1]) & ~np.isin(f64[:, 0] * n_new + f64[:, 1], have[:, 0] * n_new + have[:, 1])]
+        if len(new):
             fk = np.full(len(new), FLEXION, dtype=kind.dtype)
             s = np.concatenate([s, fs[new].astype(s.dtype)])
             rest = np.concatenate([rest, fr[new]])
