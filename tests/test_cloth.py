@@ -726,7 +726,7 @@ def test_mass_scaling_on_a_catalogue_dress_lengthens_the_step_for_little_mass():
     the eq. 4 step by over 10 % against the same model without it."""
     from engine.body.default import default_body
     from engine.scene.garments import resolve_garment
-    from engine.scene.tryon import spec_placement
+    from engine.garment.garment import spec_placement
 
     body = default_body("female")
     spec, place, name = resolve_garment("dress", body, "M")

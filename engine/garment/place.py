@@ -464,3 +464,65 @@ def wrap_trousers(uv: np.ndarray, side: str, leg: int, top_y: float, crotch_y: f
     # the seat of default:female and the front crotch of default:male 0.1 mm inside the body
     g = np.clip((y - crotch_y) / blend, 0.0, 1.0)[:, None] ** 0.9
     return g * p_t + (1 - g) * p_l
+
+
+# ------------------------------------------------------------------ a pattern's own placement, on another body
+
+# The heights a GarmentCode specification's own placement assumes: GarmentCode's mean female body
+# (../shared/samples/garmentcode/mean_female.obj, the body of its sample patterns), measured by
+# engine.body.measure. A pattern placed for it is carried onto another body landmark by landmark.
+GARMENTCODE_LANDMARKS = (("knee_height", 0.410), ("crotch_height", 0.758), ("hip_height", 0.805),
+                         ("waist_height", 1.080), ("bust_height", 1.185), ("shoulder_height", 1.370),
+                         ("height", 1.662))
+SAME_BODY = 0.01  # m: landmarks all this close to the reference's: the body the pattern was made for
+
+
+def pattern_placement(spec, body: Body):
+    """A pattern file's placement on `body`: its own translation and rotation (GarmentCode's,
+    engine.garment.garment.spec_placement) on the body it was made for; on another body the
+    placed panels are carried there from GarmentCode's mean body by the landmarks -- every
+    height mapped piecewise linearly through floor, knee, crotch, hip, waist, bust, shoulder and
+    crown -- and, where the body is wider than the panels allow, pushed out round its
+    cross-section (torso and legs) to CLEARANCE. Returns (placement, a note or None)."""
+    from engine.body.measure import measure
+    from engine.errors import TryonError
+    from engine.garment.garment import spec_placement
+
+    own = spec_placement(spec, body.to_world)
+    try:
+        m = measure(body)
+    except TryonError:
+        return own, "the body could not be measured: the pattern keeps its own placement"
+    ref, tgt = [0.0], [float(body.vertices[:, 1].min())]
+    for name, y in GARMENTCODE_LANDMARKS:
+        t = float(getattr(m, name))
+        if name == "height":
+            t += tgt[0]
+        if np.isfinite(t) and t > tgt[-1] + 0.02 and y > ref[-1]:
+            ref.append(y)
+            tgt.append(t)
+    if len(ref) == len(GARMENTCODE_LANDMARKS) + 1 and np.abs(np.subtract(ref, tgt)).max() < SAME_BODY:
+        return own, None
+    ref_a, tgt_a = np.array(ref), np.array(tgt)
+    sections = BodySections(body)
+
+    def place(name, panel, uv):
+        p = own(name, panel, uv).copy()
+        y = p[:, 1]
+        # heights: piecewise linear through the landmarks, extended past the last by its slope
+        hi = y > ref_a[-1]
+        y_new = np.interp(y, ref_a, tgt_a)
+        y_new[hi] = tgt_a[-1] + (y[hi] - ref_a[-1]) * (tgt_a[-1] - tgt_a[-2]) / (ref_a[-1] - ref_a[-2])
+        p[:, 1] = y_new
+        # out of the body: onto the cross-section's ellipse grown by CLEARANCE where inside it
+        inside_rows = (y_new >= sections.ys[0]) & (y_new <= sections.ys[-1])
+        cx, cz, a, b = sections.at(y_new).T
+        dx, dz = p[:, 0] - cx, p[:, 2] - cz
+        r = np.sqrt((dx / (a + CLEARANCE)) ** 2 + (dz / (b + CLEARANCE)) ** 2)
+        push = inside_rows & np.isfinite(r) & (r < 1.0) & (r > 1e-9)
+        p[push, 0] = cx[push] + dx[push] / r[push]
+        p[push, 2] = cz[push] + dz[push] / r[push]
+        return p
+
+    return place, ("placed from the body's landmarks (the pattern's own placement is for GarmentCode's "
+                   "mean body)")

@@ -16,7 +16,7 @@ import numpy as np
 from engine.body.types import SEGMENTS, Body
 from engine.cloth.fabrics import get_fabric
 from engine.errors import InputError
-from engine.garment.garment import Garment, build_garment, spec_placement
+from engine.garment.garment import Garment, build_garment
 from engine.pattern.spec import PatternSpec
 from engine.scene.drape import DrapeOptions, DrapeResult, Progress, most_stretched, sew_and_drape
 
@@ -97,7 +97,12 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
                          f"choose one of: {', '.join(VM_MODES)}")
     t_all = time.perf_counter()
     progress("meshing", 0.0, "meshing the panels")
-    garment = build_garment(spec, h=h, place=place or spec_placement(spec, body.to_world), source=source)
+    placement_note = None
+    if place is None:
+        from engine.garment.place import pattern_placement
+
+        place, placement_note = pattern_placement(spec, body)
+    garment = build_garment(spec, h=h, place=place, source=source)
     plan = plan_maps(body, garment, texel, collision)
     t0 = time.perf_counter()
     progress("maps", 0.0, "rendering collision maps" if collision == "image" else "building the BVH")
@@ -161,6 +166,7 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
         "settled": bool(res.settled),
         "collision_maps": map_info,
         "left_out": plan.left_out,
+        **({"placement": placement_note} if placement_note else {}),
         "sew_friction": {"scale": float(o.sew_friction),
                          "why": sew_note or ("asked for" if o.sew_friction else "the panels slide into place")},
         "tight": bool(res.strain_max > fab.strain_threshold + TIGHT),
