@@ -865,3 +865,14 @@ def test_hold_contacts_stops_only_the_inward_motion_of_contacts():
     np.testing.assert_allclose(out[1], [0.3, 0.0, 0.5])
     np.testing.assert_allclose(out[2], v[2])
     np.testing.assert_allclose(out[3], v[3])
+
+
+def test_drape_progress_follows_the_drift_down_to_rest():
+    """The drape's progress bar: 0 before the first drift is measured, rising as the drift falls
+    (log scale, 1 m/s to the settle speed), full once the cloth is at rest."""
+    from engine.scene.drape import _settle_fraction
+
+    drifts = [np.inf, 2.0, 0.3, 0.05, 0.02, 0.006, 0.005, 0.001]
+    f = [_settle_fraction(d, 0.005) for d in drifts]
+    assert f[0] == 0.0 and f[1] == 0.0 and f[-1] == 1.0 and f[-2] == 1.0
+    assert all(a <= b for a, b in zip(f, f[1:])) and 0.0 < f[3] < 1.0

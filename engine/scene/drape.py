@@ -317,7 +317,8 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, optio
             observer("draping", state.x, tri1, None)
         if it % check_every == 0:
             _check_finite(state, "draping")
-            progress("draping", min(1.0, it / max(min_it, 1)), f"drift {drift * 100:.2f} cm/s")
+            progress("draping", _settle_fraction(drift, o.settle_speed),
+                     f"drift {drift * 100:.2f} cm/s (at rest below {o.settle_speed * 100:.1f})")
         if (it + 1) % sub == 0:
             snaps.append(state.x.copy())
             guards.append(guard_steps)
@@ -350,6 +351,15 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, optio
                        seam_gap_max=0.0, settled=settled, kinetic_energy=solver.kinetic_energy(state),
                        strain_max=strain, dt=dt, strain_guard=solver.strain_guard,
                        guard_share=guard_share, snapped=0)
+
+
+def _settle_fraction(drift: float, settle_speed: float, start: float = 1.0) -> float:
+    """The drape's progress for a progress bar: how far the drift has come down from `start`
+    (m/s) to the settle speed, on a log scale (its end cannot be known in advance; a bar that
+    counted simulated time filled long before the cloth came to rest)."""
+    if not np.isfinite(drift) or drift >= start:
+        return 0.0
+    return float(min(1.0, np.log(start / max(drift, settle_speed)) / np.log(start / settle_speed)))
 
 
 def _edge(g: Garment) -> float:
