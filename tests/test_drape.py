@@ -471,3 +471,22 @@ def test_coarse_skirt_quality_both_collisions(collision):
     assert rep["penetration_mm"]["max"] <= 3.0 and rep["penetration_mm"]["p99"] <= 1.0, rep["penetration_mm"]
     assert rep["strain"]["max"] <= rep["strain"]["threshold"] + 0.01, rep["strain"]
     assert 0.9 < res.positions[:, 1].max() < 1.15 and res.positions[:, 1].min() > 0.25  # hem ~0.30 m
+
+
+def test_a_pattern_too_small_is_told_to_grade_it_not_to_pick_a_size():
+    """A catalogue garment too small for the body is told to try a larger size; a pattern file
+    has one size, so its errors say to grade it larger (a 1.9 m, weight 1.0 man in the sample
+    skirt: its seams stop closing 5-8 cm apart)."""
+    from engine.body import resolve_body
+    from engine.errors import SimulationError
+    from engine.scene.garments import add_size_hint
+
+    body = resolve_body("default:female")
+    for text in ("sewing stopped closing; open seams: x (7.3 cm). The garment may be too small for this body "
+                 "(try a larger size) or the panels start too far apart",
+                 "the garment is too small for this body: after draping it is stretched 16 % where cotton "
+                 "allows 5 %; try a larger size"):
+        err = SimulationError(text)
+        err.too_small = True
+        add_size_hint(err, str(SAMPLE_SKIRT), body, None)
+        assert "grade it larger" in str(err) and "larger size" not in str(err), str(err)

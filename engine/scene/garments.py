@@ -35,11 +35,19 @@ def resolve_garment(arg: str, body: Body, size: str | None = "M"):
 def add_size_hint(err: Exception, arg: str, body: Body, size: str | None) -> None:
     """A catalogue garment that came out too small for the body (the drape marks such an error
     `too_small`: it could not be sewn, or ended stretched): add to the error's message the size
-    --size auto picks for this body, when that is larger than the one asked for."""
+    --size auto picks for this body, when that is larger than the one asked for. For a pattern
+    file the advice to try a larger size becomes one to grade the pattern larger."""
     from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES, recommend_size
 
+    if not getattr(err, "too_small", False):
+        return
+    if arg not in CATALOGUE:  # a pattern file has one size: "try a larger size" means grading it
+        msg = str(err).replace("(try a larger size)", "(a pattern has one size: grade it larger)")
+        msg = msg.replace("; try a larger size", "; a pattern has one size: grade it larger for this body")
+        err.args = (msg,) + tuple(err.args[1:])
+        return
     size = size or "M"
-    if arg not in CATALOGUE or size == AUTO or not getattr(err, "too_small", False):
+    if size == AUTO:
         return
     try:
         best = recommend_size(arg, body)
