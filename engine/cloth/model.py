@@ -122,6 +122,14 @@ def _unique_pairs(pairs: np.ndarray) -> np.ndarray:
     return np.unique(p, axis=0)
 
 
+def _pairs_in(pairs: np.ndarray, among: np.ndarray) -> np.ndarray:
+    """(P,) bool: which rows of pairs (P, 2) are rows of among (M, 2), both as given (sort the
+    ends first for unordered pairs)."""
+    a, b = pairs.astype(np.int64), among.astype(np.int64)
+    n = int(max(a.max(initial=0), b.max(initial=0))) + 1
+    return np.isin(a[:, 0] * n + a[:, 1], b[:, 0] * n + b[:, 1])
+
+
 def build_springs(uv: np.ndarray, panel: np.ndarray, lattice: np.ndarray, quads: np.ndarray,
                   tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(S, 2) int32 springs and (S,) int8 kinds from the flat mesh."""
@@ -166,9 +174,7 @@ def build_springs(uv: np.ndarray, panel: np.ndarray, lattice: np.ndarray, quads:
     flex = _unique_pairs(np.asarray(flex, dtype=np.int64).reshape(-1, 2)) if flex else np.zeros((0, 2), np.int64)
     # a structural/shear pair is not also a flexion spring
     if len(flex):
-        n = int(max(flex.max(), structural.max(initial=0), shear.max(initial=0))) + 1
-        taken = np.concatenate([structural, shear]).astype(np.int64)
-        flex = flex[~np.isin(flex[:, 0] * n + flex[:, 1], taken[:, 0] * n + taken[:, 1])].reshape(-1, 2)
+        flex = flex[~_pairs_in(flex, np.concatenate([structural, shear]))].reshape(-1, 2)
     springs = np.concatenate([structural, shear, flex]).astype(np.int32)
     kind = np.concatenate([np.full(len(structural), STRUCTURAL), np.full(len(shear), SHEAR),
                            np.full(len(flex), FLEXION)]).astype(np.int8)
@@ -319,11 +325,9 @@ def weld_model(model: ClothModel, vertex_map: np.ndarray, uv: np.ndarray | None 
     if uv is not None and len(model.seams):
         fs, fr = seam_flexion(uv, model.springs, model.kind, model.rest, model.seams)
         fs = np.sort(vertex_map[fs], axis=1)
-        have = np.sort(s, axis=1).astype(np.int64)
         _, new = np.unique(fs, axis=0, return_index=True)  # one per welded pair, none doubling a spring
         new = np.sort(new)
-        f64 = fs[new].astype(np.int64)
-        new = new[(f64[:, 0] != f64[:, 1]) & ~np.isin(f64[:, 0] * n_new + f64[:, 1], have[:, 0] * n_new + have[:, 1])]
+        new = new[(fs[new, 0] != fs[new, 1]) & ~_pairs_in(fs[new], np.sort(s, axis=1))]
         if len(new):
             fk = np.full(len(new), FLEXION, dtype=kind.dtype)
             s = np.concatenate([s, fs[new].astype(s.dtype)])

@@ -493,12 +493,11 @@ def pattern_placement(spec, body: Body):
         m = measure(body)
     except TryonError:
         return own, "the body could not be measured: the pattern keeps its own placement"
-    ref, tgt = [0.0], [float(body.vertices[:, 1].min())]
+    floor = float(body.vertices[:, 1].min())  # the measurements are heights above it
+    ref, tgt = [0.0], [floor]
     for name, y in GARMENTCODE_LANDMARKS:
-        t = float(getattr(m, name))
-        if name == "height":
-            t += tgt[0]
-        if np.isfinite(t) and t > tgt[-1] + 0.02 and y > ref[-1]:
+        t = floor + float(getattr(m, name))
+        if np.isfinite(t) and t > tgt[-1] + 0.02:
             ref.append(y)
             tgt.append(t)
     if len(ref) == len(GARMENTCODE_LANDMARKS) + 1 and np.abs(np.subtract(ref, tgt)).max() < SAME_BODY:
@@ -507,7 +506,7 @@ def pattern_placement(spec, body: Body):
     sections = BodySections(body)
 
     def place(name, panel, uv):
-        p = own(name, panel, uv).copy()
+        p = own(name, panel, uv)
         y = p[:, 1]
         # heights: piecewise linear through the landmarks, extended past the last by its slope
         hi = y > ref_a[-1]
