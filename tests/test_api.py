@@ -386,3 +386,20 @@ def test_cancel_and_delete_running(tmp_path):
                     headers=h).json()["id"]
         assert wait(c, h, c2, timeout=120)["status"] == "done"
         assert not (c.app.state.settings.data_dir / "jobs" / b).exists()
+
+
+def test_worker_warm_up_loads_the_engine_and_never_raises(monkeypatch, capsys):
+    """A fresh worker, while no try-on waits, dresses a coarse skirt once (kernels, body, GL
+    context); a failure there is reported and printed, never raised (the worker goes on)."""
+    from app.worker import warm_up
+
+    r = warm_up()
+    assert r["ok"] is True and r["seconds"] > 0
+
+    def broken(*a, **k):
+        raise RuntimeError("no GL here")
+
+    monkeypatch.setattr("engine.scene.tryon.run_tryon", broken)
+    r = warm_up()
+    assert r["ok"] is False
+    assert "no GL here" in capsys.readouterr().err
