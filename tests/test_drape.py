@@ -115,6 +115,22 @@ def test_a_dress_sews_at_other_cloth_resolutions(edge):
     assert rep["shift_mm"]["top"] > -60.0, rep["shift_mm"]  # on the shoulders (fallen: -400)
 
 
+def test_a_garment_that_slides_off_the_body_is_an_error_not_a_result(tmp_path):
+    """An XXL skirt (waist 93 cm) on a thin body (default:female, weight 0: waist ~60 cm) slides
+    down the legs and settles around the feet, with every bar met (no penetration, strain
+    within the limit, settled): `tryon drape` ends with an error that says it slid off and
+    what to do, writes the picture of where it ended (failed.png) and no result files."""
+    out = tmp_path / "xxl"
+    r = _drape_cli(["--body", "default:female,weight=0.0", "--garment", "skirt", "--size", "XXL",
+                    "--resolution", "3", "--out", str(out)])
+    assert r.exit_code == 2, (r.exit_code, r.output)
+    err = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
+    assert len(err) == 1 and "slid" in err[0] and "cm down the body" in err[0] and "smaller size" in err[0], r.stderr
+    assert "Traceback" not in r.output
+    assert (out / "failed.png").stat().st_size > 0
+    assert not (out / "report.json").exists() and not (out / "scene.glb").exists()
+
+
 @pytest.mark.slow
 def test_a_garment_far_too_small_is_refused():
     """The sample scan's XS sleeveless shirt (chart bust 82 cm on a 97.5 cm bust): its side
