@@ -115,6 +115,34 @@ def test_a_dress_sews_at_other_cloth_resolutions(edge):
     assert rep["shift_mm"]["top"] > -60.0, rep["shift_mm"]  # on the shoulders (fallen: -400)
 
 
+def test_flat_panels_whose_seams_stop_closing_are_sewn_again_gently():
+    """GarmentCode lays panels out flat round the body (the sample skirt's seams start 30 cm
+    apart). If they do not close, sewing starts once more from the placement, pulled at
+    DrapeOptions.far_retry_vmax (GarmentCode's own T-shirt: its sleeves' seams stalled 9 cm
+    open at 3 m/s and sewed at 1.5). Here the first pull is made far too slow to close within
+    the budget: the second one sews; both attempts count; the progress says why it sews again.
+    If both fail, the error says it was sewn twice."""
+    from engine.body import resolve_body
+    from engine.errors import SimulationError
+    from engine.scene.drape import DrapeOptions
+    from engine.scene.garments import resolve_garment
+    from engine.scene.tryon import run_tryon
+
+    body = resolve_body(str(SAMPLE_BODY))
+    spec, place, name = resolve_garment(str(SAMPLE_SKIRT), body, None)
+    said = []
+    o = DrapeOptions(sew_vmax=0.05, far_retry_vmax=3.0, sew_budget=0.5, drape_budget=0.3)
+    res, rep = run_tryon(body, spec, h=0.04, place=place, source=name, options=o,
+                         progress=lambda stage, f, msg: said.append(msg))
+    assert rep["seam_gap_mm"]["snapped"] == 0 and rep["cloth_vertices"] < rep["cloth_vertices_unsewn"]
+    budget = int(np.ceil(0.5 / res.dt))
+    assert rep["iterations_by_stage"]["sewing"] > budget  # the failed first attempt, then the second
+    assert any("sewing again, pulled at 3 m/s" in m for m in said)
+    with pytest.raises(SimulationError, match=r"sewn twice, pulled at 0.05 and 0.06 m/s"):
+        run_tryon(body, spec, h=0.04, place=place, source=name,
+                  options=DrapeOptions(sew_vmax=0.05, far_retry_vmax=0.06, sew_budget=0.3))
+
+
 def test_a_garment_that_slides_off_the_body_is_an_error_not_a_result(tmp_path):
     """An XXL skirt (waist 93 cm) on a thin body (default:female, weight 0: waist ~60 cm) slides
     down the legs and settles around the feet, with every bar met (no penetration, strain
