@@ -231,6 +231,25 @@ def test_a_garmentcode_pattern_keeps_its_own_placement_on_its_own_body():
     np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize("body_arg, carried", [("default:female", True), (str(SAMPLE_BODY), False)])
+def test_a_carried_pattern_whose_seams_stay_open_says_the_placement_may_be_why(body_arg, carried):
+    """Sewing that fails (here: a sewing budget far too short to close the sample skirt's seams)
+    on a body the pattern was not made for says that its placement was carried from
+    GarmentCode's mean body, and what to do; on its own body it does not."""
+    from engine.body import resolve_body
+    from engine.errors import SimulationError
+    from engine.garment.place import CARRIED_HINT
+    from engine.pattern.io import load_pattern
+    from engine.scene.drape import DrapeOptions
+    from engine.scene.tryon import run_tryon
+
+    body = resolve_body(body_arg)
+    with pytest.raises(SimulationError) as e:
+        run_tryon(body, load_pattern(SAMPLE_SKIRT), h=0.05, options=DrapeOptions(sew_budget=0.01, far_retry_vmax=0.0))
+    assert "did not close" in str(e.value)
+    assert (CARRIED_HINT in str(e.value)) == carried
+
+
 def test_a_garment_that_falls_off_the_body_is_refused():
     """A pattern placed beside the body (the sample skirt moved 1 m to the side) falls past the
     feet: a clear error, not a result with a warning that it slid 27 m down."""

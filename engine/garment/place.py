@@ -523,5 +523,12 @@ def pattern_placement(spec, body: Body):
         p[push, 2] = cz[push] + dz[push] / r[push]
         return p
 
-    return place, ("placed from the body's landmarks (the pattern's own placement is for GarmentCode's "
-                   "mean body)")
+    return place, CARRIED
+
+
+CARRIED = "placed from the body's landmarks (the pattern's own placement is for GarmentCode's mean body)"
+# what a try-on whose placement was CARRIED adds to a sewing failure (engine.scene.tryon)
+CARRIED_HINT = ("This pattern was laid out round GarmentCode's mean body and carried onto this body by its "
+                "heights alone (not its widths or the angle of its arms), which does not always leave seams that "
+                "can close: dress the body the pattern was made for, or make the pattern in GarmentCode for this "
+                "body's measurements")

@@ -15,7 +15,7 @@ import numpy as np
 
 from engine.body.types import SEGMENTS, Body
 from engine.cloth.fabrics import get_fabric
-from engine.errors import InputError
+from engine.errors import InputError, SimulationError
 from engine.garment.garment import Garment, build_garment
 from engine.pattern.spec import PatternSpec
 from engine.scene.drape import DrapeOptions, DrapeResult, Progress, most_stretched, sew_and_drape
@@ -126,7 +126,11 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
             if not shown[0] and bv is None:
                 bv, shown[0] = lift.raised.vertices, True
             watch(stage, x, tri, bv)
-    res = sew_and_drape(garment, collider, o, progress, observer=observer)
+    try:
+        res = sew_and_drape(garment, collider, o, progress, observer=observer)
+    except SimulationError as e:
+        _carried_hint(e, placement_note)
+        raise
     res.spec = spec
     if lift is not None:
         from engine.scene.arms import lower_arms
@@ -142,8 +146,6 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
     fab = get_fabric(fabric)
     shift = hang_shift(garment.positions, res.positions)
     if shift["top"] < -SLID_OFF:  # settled, but not on the body: never written as a result
-        from engine.errors import SimulationError
-
         floor = float(body.vertices[:, 1].min())
         err = SimulationError(
             f"the garment slid {-100 * shift['top']:.0f} cm down the body (its top ended "
@@ -151,6 +153,7 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
             "it is too large for this body, or its seams did not close around it; try a smaller size, or "
             "check the pattern's panels")
         err.positions, err.triangles = res.positions.copy(), res.triangles  # for a picture
+        _carried_hint(err, placement_note, slid=True)
         raise err
     report = {
         "body": body.name, "garment": source, "fabric": fabric, "collision": collision,
@@ -189,6 +192,17 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
                                                                            "raised": 100 * lift.gap_raised},
                                   "why": lift.describe(), **res.lowering}
     return res, report
+
+
+def _carried_hint(err: Exception, placement_note: str | None, slid: bool = False) -> None:
+    """A GarmentCode pattern carried onto another body by its landmarks (pattern_placement) whose
+    seams did not close, or that slid down the body: say that the placement may be why
+    (measured: GarmentCode's own T-shirt sews on its mean body, and on default:female and
+    default:male it falls from the shoulders before its 5 cm shoulder seams close)."""
+    from engine.garment.place import CARRIED, CARRIED_HINT
+
+    if placement_note == CARRIED and (slid or getattr(err, "open_top", None) is not None):
+        err.args = (f"{err}. {CARRIED_HINT}",) + tuple(err.args[1:])
 
 
 # x the fabric's friction while sewing on a body whose arms hang closer to its torso than
