@@ -7,6 +7,8 @@ SAMPLES = ROOT.parent / "shared" / "samples" / "garmentcode"
 SAMPLE_BODY = SAMPLES / "mean_female.obj"
 SAMPLE_YAML = SAMPLES / "mean_female.yaml"
 SAMPLE_SKIRT = SAMPLES / "flare_skirt_specification.json"
+# GarmentCode's own T-shirt (tests/garmentcode/README.md): a sleeved pattern file
+GC_SHIRT = ROOT / "tests" / "garmentcode" / "shirt_mean_specification.json"
 
 
 def write_anim_zip(path, frames, faces, names=None):

@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from engine.cli import app
-from tests.samples import SAMPLE_BODY, SAMPLE_SKIRT, write_arms_lowered_scan
+from tests.samples import GC_SHIRT, SAMPLE_BODY, SAMPLE_SKIRT, write_arms_lowered_scan
 
 REPORT_KEYS = {"cloth_vertices", "iterations", "ms_per_iteration", "wall_seconds", "penetration_mm", "strain",
                "seam_gap_mm", "settled", "left_out", "shift_mm", "warnings"}
@@ -229,6 +229,61 @@ def test_a_garmentcode_pattern_keeps_its_own_placement_on_its_own_body():
     a = build_garment(spec, h=0.03, place=place).positions
     b = build_garment(spec, h=0.03, place=spec_placement(spec, body.to_world)).positions
     np.testing.assert_array_equal(a, b)
+
+
+def test_a_garmentcode_t_shirt_is_wrapped_round_another_body():
+    """GarmentCode lays its T-shirt out round its mean body: flat front and back halves 45 cm
+    apart, half sleeves flat beside the arms. Carried onto another body by heights alone it fell
+    from the shoulders before the shoulder seams closed; now (pattern_placement) the torso
+    halves are wrapped round the torso, front in front, and the half sleeves round the body's
+    own arms, clear of the body."""
+    from engine.body import resolve_body
+    from engine.collide.bvh import MeshBVH, penetration_depth
+    from engine.garment.garment import build_garment
+    from engine.garment.place import CARRIED, arm_path, pattern_placement
+    from engine.pattern.catalogue import arm_joints
+    from engine.pattern.io import load_pattern
+
+    body = resolve_body("default:female")
+    spec = load_pattern(GC_SHIRT)
+    place, note = pattern_placement(spec, body)
+    assert note == CARRIED
+    g = build_garment(spec, h=0.03, place=place)
+    x = g.positions
+    arms = arm_joints(body)
+    for name in g.panel_names:
+        sel = g.panel == g.panel_names.index(name)
+        if "sleeve" in name:  # round its own arm: within 12 cm of the arm's axis, that side
+            side = "left" if name.startswith("left") else "right"
+            path = arm_path(arms[side])
+            d = np.linalg.norm(x[sel][:, None, :] - path[None], axis=2).min(axis=1)
+            assert d.max() < 0.12, (name, d.max())
+            assert np.all(np.sign(x[sel, 0]) == (1 if side == "left" else -1))
+        else:  # round the torso: front halves in front, back halves behind, within 20 cm of it
+            front = "ftorso" in name
+            assert (x[sel, 2].mean() > 0) == front, name
+            assert np.abs(x[sel][:, [0, 2]]).max() < 0.3, name
+    depth, _ = penetration_depth(MeshBVH(body.vertices, body.faces), x)
+    assert (depth > 0).mean() < 0.01 and depth.max() < 0.02, (int((depth > 0).sum()), float(depth.max()))
+
+
+@pytest.mark.parametrize("scan", [False, True])
+def test_a_garmentcode_t_shirt_dresses_a_body_it_was_not_made_for(tmp_path, scan):
+    """... and dresses it: default:female, and the same body as a scan (no rig: its arms come
+    from the default skeleton fitted to it). Every seam closes, the quality bars hold, and the
+    shirt stays on the shoulders (its top ends where it was placed)."""
+    from engine.body import resolve_body
+    from engine.pattern.io import load_pattern
+    from engine.scene.tryon import run_tryon
+
+    arg = "default:female"
+    if scan:
+        arg = str(write_arms_lowered_scan(tmp_path / "scan.obj", 0.0))
+    body = resolve_body(arg)
+    _, rep = run_tryon(body, load_pattern(GC_SHIRT), h=0.02)  # (welds close <= half an edge: 1 cm)
+    assert "landmarks and arms" in rep["placement"]
+    _check_quality(rep)
+    assert rep["seam_gap_mm"]["snapped"] == 0
 
 
 @pytest.mark.parametrize("body_arg, carried", [("default:female", True), (str(SAMPLE_BODY), False)])

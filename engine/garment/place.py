@@ -475,6 +475,52 @@ GARMENTCODE_LANDMARKS = (("knee_height", 0.410), ("crotch_height", 0.758), ("hip
                          ("waist_height", 1.080), ("bust_height", 1.185), ("shoulder_height", 1.370),
                          ("height", 1.662))
 SAME_BODY = 0.01  # m: landmarks all this close to the reference's: the body the pattern was made for
+# The same body's arms (engine.body.fit.fit_rig on the sample scan, engine.pattern.catalogue's arm
+# joints): side -> (shoulder, elbow) joint, world metres. They hang 50 degrees from the vertical;
+# the default bodies' 42-43, 2.7 cm (female) nearer the middle
+GARMENTCODE_ARMS = {"left": ((0.188, 1.312, -0.004), (0.402, 1.131, 0.040)),
+                    "right": ((-0.181, 1.312, -0.004), (-0.395, 1.131, 0.038))}
+SLEEVE_BEYOND = 0.05  # m: a panel whose centre lies this far out past the shoulder joint, above
+SLEEVE_BELOW = 0.15  # m: ... the joint's height less this, is a sleeve (wrapped round the arm)
+
+
+def sleeve_side(outline: np.ndarray) -> str | None:
+    """'left' / 'right' if a panel GarmentCode placed round its mean body (its placed outline
+    (M, 3)) lies over that arm of it (SLEEVE_BEYOND, SLEEVE_BELOW), else None."""
+    c = outline.mean(axis=0)
+    for side, (s_ref, _) in GARMENTCODE_ARMS.items():
+        if c[0] * s_ref[0] > 0 and abs(c[0]) > abs(s_ref[0]) + SLEEVE_BEYOND and c[1] > s_ref[1] - SLEEVE_BELOW:
+            return side
+    return None
+
+
+def sleeve_tube(joints: np.ndarray, side: str, p: np.ndarray, o: np.ndarray) -> np.ndarray:
+    """A sleeve panel GarmentCode laid flat beside its mean body's arm `side` (points p (n, 3)
+    and its outline o (M, 3), as placed) -> (n, 3) round the target's arm (joints (3, 3):
+    shoulder, elbow, wrist), as the catalogue's sleeves are (wrap_sleeve): in the reference
+    arm's frame a point's distance along the arm from the panel's innermost point (the cap)
+    becomes its distance from the target's shoulder joint, and its distance below the panel's
+    top line (the seam over the arm) the way round a tube -- by the front for a panel in front
+    of the arm, by the back for one behind it -- whose half circumference is the panel's width
+    (at least the arm's radius and CLEARANCE)."""
+    s_ref, e_ref = (np.array(q) for q in GARMENTCODE_ARMS[side])
+    d = (e_ref - s_ref) / np.linalg.norm(e_ref - s_ref)
+    up = np.array([0.0, 1.0, 0.0]) - d[1] * d
+    up /= np.linalg.norm(up)
+    fwd = np.cross(d, up)
+    fwd *= 1.0 if fwd[2] >= 0 else -1.0
+
+    def frame(q):
+        r = q - s_ref
+        return r @ d, r @ up, r @ fwd
+
+    a_o, c_o, f_o = frame(o)
+    a_p, c_p, _ = frame(p)
+    top = c_o.max()
+    radius = max((top - c_o.min()) / np.pi, 0.045 + CLEARANCE)
+    way = 1.0 if f_o.mean() > 0 else -1.0
+    uv = np.stack([way * (top - c_p), a_o.min() - a_p], axis=1)
+    return wrap_sleeve(uv, arm_path(joints), int(round(0.15 / 0.005)), np.full(len(p), radius))
 
 
 def pattern_placement(spec, body: Body):
@@ -482,11 +528,21 @@ def pattern_placement(spec, body: Body):
     engine.garment.garment.spec_placement) on the body it was made for; on another body the
     placed panels are carried there from GarmentCode's mean body by the landmarks -- every
     height mapped piecewise linearly through floor, knee, crotch, hip, waist, bust, shoulder and
-    crown -- and, where the body is wider than the panels allow, pushed out round its
-    cross-section (torso and legs) to CLEARANCE. Returns (placement, a note or None)."""
+    crown. Then, as the catalogue's garments are placed:
+    - a sleeve (a panel laid out over one of the mean body's arms) is wrapped round the body's
+      arm (sleeve_tube);
+    - a panel reaching above the armpits (a top's, a dress's) is wrapped round the torso from
+      its carried top down by its own length (wrap_torso);
+    - the others (skirts, trousers) keep the carried heights and, where the body is wider than
+      the panels allow, are pushed out round its cross-section (torso and legs) to CLEARANCE.
+    Measured on GarmentCode's own T-shirt (flat front and back panels 45 cm apart, half sleeves
+    laid beside the arms), carried by heights alone: it fell from the shoulders of default:female
+    and default:male before its 5 cm shoulder seams closed; wrapped, it sews on both.
+    Returns (placement, a note or None)."""
     from engine.body.measure import measure
     from engine.errors import TryonError
     from engine.garment.garment import spec_placement
+    from engine.pattern import geometry as geo
 
     own = spec_placement(spec, body.to_world)
     try:
@@ -505,14 +561,41 @@ def pattern_placement(spec, body: Body):
     ref_a, tgt_a = np.array(ref), np.array(tgt)
     sections = BodySections(body)
 
-    def place(name, panel, uv):
-        p = own(name, panel, uv)
-        y = p[:, 1]
+    def heights(p):
         # heights: piecewise linear through the landmarks, extended past the last by its slope
+        y = p[:, 1]
         hi = y > ref_a[-1]
         y_new = np.interp(y, ref_a, tgt_a)
         y_new[hi] = tgt_a[-1] + (y[hi] - ref_a[-1]) * (tgt_a[-1] - tgt_a[-2]) / (ref_a[-1] - ref_a[-2])
         p[:, 1] = y_new
+        return p
+
+    rel = spec.properties.curvature_coords == "relative"
+    outlines = {n: own(n, pn, geo.outline(pn, spec.scale, rel)) for n, pn in spec.pattern.panels.items()}
+    sleeves = {n: s for n, s in ((n, sleeve_side(o)) for n, o in outlines.items()) if s is not None}
+    arms = _arms_of(body) if sleeves else None
+    armpit = floor + float(m.armpit_height)
+
+    def place(name, panel, uv):
+        p = own(name, panel, uv)
+        o = outlines[name]
+        if name in sleeves and arms is not None:
+            return sleeve_tube(arms[sleeves[name]], sleeves[name], p, o)
+        top_own = float(o[:, 1].max())
+        top = float(heights(np.array([[0.0, top_own, 0.0]]))[0, 1])
+        if name not in sleeves and np.isfinite(armpit) and top > armpit:
+            # a top's panel, laid flat in front of or behind the body: wrapped round it as the
+            # catalogue's are (wrap_torso), its x the way round from the front (back) centre
+            # line, its top at the carried height and its own length below it (carried heights
+            # stretch a panel between landmarks further apart: on default:male GarmentCode's
+            # T-shirt sprang up to the chest)
+            uv_o = np.stack([o[:, 0], o[:, 1] - top_own], axis=1)
+            both = np.concatenate([uv_o, uv_o[::-1] * np.array([-1.0, 1.0])])  # widths both sides of x = 0
+            hint = PanelHint(side="front" if o[:, 2].mean() > 0 else "back")
+            return wrap_torso(np.stack([p[:, 0], p[:, 1] - top_own], axis=1), hint, sections, top, both,
+                              clamp_y=armpit, lean=not sleeves)
+        p = heights(p)
+        y_new = p[:, 1]
         # out of the body: onto the cross-section's ellipse grown by CLEARANCE where inside it
         inside_rows = (y_new >= sections.ys[0]) & (y_new <= sections.ys[-1])
         cx, cz, a, b = sections.at(y_new).T
@@ -526,9 +609,33 @@ def pattern_placement(spec, body: Body):
     return place, CARRIED
 
 
-CARRIED = "placed from the body's landmarks (the pattern's own placement is for GarmentCode's mean body)"
+CARRIED = ("placed from the body's landmarks and arms (the pattern's own placement is for GarmentCode's "
+           "mean body)")
 # what a try-on whose placement was CARRIED adds to a sewing failure (engine.scene.tryon)
 CARRIED_HINT = ("This pattern was laid out round GarmentCode's mean body and carried onto this body by its "
-                "heights alone (not its widths or the angle of its arms), which does not always leave seams that "
-                "can close: dress the body the pattern was made for, or make the pattern in GarmentCode for this "
-                "body's measurements")
+                "landmarks, which does not always leave seams that can close: dress the body the pattern was "
+                "made for, or make the pattern in GarmentCode for this body's measurements")
+
+
+def _arms_of(body: Body) -> dict[str, np.ndarray] | None:
+    """The body's arm joints (engine.pattern.catalogue.arm_joints): from its rig, or from the
+    default skeleton fitted to it (a scan); None when neither can be had."""
+    from engine.errors import TryonError
+    from engine.pattern.catalogue import arm_joints
+
+    arms = arm_joints(body)
+    if arms is None:
+        from engine.body.fit import fit_rig
+        from engine.body.measure import measure
+
+        from engine.pattern.catalogue import chart_of
+
+        try:
+            men = chart_of(body, measure(body)) == "men"
+        except TryonError:
+            men = False
+        try:
+            arms = arm_joints(fit_rig(body, "male" if men else "female"))
+        except TryonError:
+            return None
+    return arms

@@ -234,7 +234,7 @@ def _fit(body: Body, size: str) -> Fit:
         underarm = min(underarm, m.armpit_height - ARMHOLE_PER_ARM_ROOT * m.arm_root)
     fit = Fit(bust, waist, hips, 100 * m.height, 100 * m.shoulder_height, 100 * m.waist_height,
                100 * m.hip_height, 100 * m.crotch_height, 100 * m.knee_height, 100 * sw, 100 * underarm,
-               _arm_joints(body), chart is MEN, _ankle_girths(body))
+               arm_joints(body), chart is MEN, _ankle_girths(body))
     # the neckline: at least 0.045 x height each side of the centre, wider where the body's neck
     # base is (a muscular neck and trapezius), with 1 cm to spare
     nw = 0.045 * m.height
@@ -288,7 +288,7 @@ def _side_neck_height(body: Body, nw: float, shoulder_h: float) -> float:
 ARM_JOINTS = (("upperarm01", "shoulder01"), ("lowerarm01",), ("wrist",))
 
 
-def _arm_joints(body: Body) -> dict[str, np.ndarray] | None:
+def arm_joints(body: Body) -> dict[str, np.ndarray] | None:
     """Upper arm, elbow and wrist joint positions of each arm from the rig (None without one)."""
     rig = body.rig
     if rig is None:
@@ -578,7 +578,7 @@ def make_garment(name: str, body: Body, size: str = "M"):
         from engine.body.fit import fit_rig
 
         arm_body = fit_rig(body, "male" if fit.men else "female")
-        fit.arms = _arm_joints(arm_body)
+        fit.arms = arm_joints(arm_body)
     made = CATALOGUE[name][0](fit)
     # covering ellipses for every garment (the box's inscribed one started the male hips inside
     # the skirt and dress)
