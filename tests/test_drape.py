@@ -90,6 +90,10 @@ def test_fit_warnings_say_tight_or_unsettled():
     assert fit_warnings(0.059, cotton, True, 6.0) == []
     tight, unsettled = fit_warnings(0.08, cotton, False, 6.0)
     assert "tight: stretched 8 % where cotton allows 5 %" in tight and "did not settle within 6 s" in unsettled
+    assert "try a larger size" in tight
+    # a pattern file has one size: the advice is to grade it, not to pick another size
+    (tight,) = fit_warnings(0.08, cotton, True, 6.0, pattern_file=True)
+    assert "grade it larger" in tight and "larger size" not in tight
 
 
 @pytest.mark.parametrize("edge", [0.012, 0.0163])

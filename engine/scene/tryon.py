@@ -98,6 +98,7 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
     t_all = time.perf_counter()
     progress("meshing", 0.0, "meshing the panels")
     placement_note = None
+    pattern_file = place is None  # a pattern file's placement (its own, or carried by landmarks)
     if place is None:
         from engine.garment.place import pattern_placement
 
@@ -185,7 +186,7 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
                          "why": sew_note or ("asked for" if o.sew_friction else "the panels slide into place")},
         "tight": bool(res.strain_max > fab.strain_threshold + TIGHT),
         "warnings": garment.warnings + hang_warnings(shift) + fit_warnings(res.strain_max, fab, res.settled,
-                                                                           o.drape_budget),
+                                                                           o.drape_budget, pattern_file),
     }
     if lift is not None:
         report["arms_lowered"] = {"degrees": lift.degrees, "arm_gap_cm": {"as_loaded": 100 * lift.gap_loaded,
@@ -246,14 +247,16 @@ TIGHT = 0.01  # a drape stretched past the fabric's threshold by more than this 
 # (issue 3's quality limit; the strain guard holds a garment that fits at threshold + 0.9 %)
 
 
-def fit_warnings(strain: float, fabric, settled: bool, budget: float) -> list[str]:
+def fit_warnings(strain: float, fabric, settled: bool, budget: float, pattern_file: bool = False) -> list[str]:
     """Warnings about a drape that ended but does not fit well: stretched past the fabric's
     limit by more than TIGHT (past DrapeOptions.too_tight it is refused instead), or not
-    settled within the budget (s of simulated time)."""
+    settled within the budget (s of simulated time). A pattern file has one size: the advice
+    is to grade it larger, not to pick a larger size."""
     out = []
     if strain > fabric.strain_threshold + TIGHT:
+        advice = "a pattern has one size: grade it larger for this body" if pattern_file else "try a larger size"
         out.append(f"the garment is tight: stretched {100 * strain:.0f} % where {fabric.name} allows "
-                   f"{100 * fabric.strain_threshold:.0f} % (try a larger size)")
+                   f"{100 * fabric.strain_threshold:.0f} % ({advice})")
     if not settled:
         out.append(f"the drape did not settle within {budget:g} s of simulated time: the cloth may "
                    "still be moving in the pictures")
