@@ -273,6 +273,20 @@ def test_fire_mix_turns_velocity_toward_the_force_or_stops():
     assert np.all(v2 == 0.0)
 
 
+
+def test_the_guard_takes_away_the_velocity_that_would_stretch_its_springs_again():
+    """inelastic_guard: a vertex the strain guard moved keeps its velocity along and across its
+    move, but loses the part pointing back against it; vertices the guard left alone keep theirs."""
+    x0 = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    x = x0.copy()
+    x[0] += [0.001, 0.0, 0.0]  # moved +x
+    x[1] += [0.0, 0.002, 0.0]  # moved +y
+    v = np.array([[-0.5, 0.3, 0.0], [0.2, 0.4, -0.1], [-1.0, -1.0, 0.0]])
+    assert K.inelastic_guard(x, x0, v) == 1
+    np.testing.assert_allclose(v[0], [0.0, 0.3, 0.0], atol=1e-12)  # the part against the move is gone
+    np.testing.assert_allclose(v[1], [0.2, 0.4, -0.1])  # moving with its move: kept
+    np.testing.assert_allclose(v[2], [-1.0, -1.0, 0.0])  # not moved: kept
+
 @pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan")])
 def test_model_refuses_bad_spring_damping(garment, bad):
     with pytest.raises(InputError, match="spring damping"):

@@ -381,6 +381,32 @@ def provot_positions(x, springs, rest, active, threshold, inv_mass, passes, work
     return n_act
 
 
+@serial_kernel
+def inelastic_guard(x, x_before, v):
+    """After the strain guard moved positions (x_before -> x): each moved vertex loses the part
+    of its velocity that points back against its move (v <- v - min(0, v.d) d / |d|^2, d its
+    move), as an inelastic constraint would -- the guard's springs stop being stretched again
+    by that velocity next step. Without it a vertex the guard held kept a velocity the guard
+    took back every step (measured: 0.5-0.7 m/s at default:female's armpits), FIRE's power
+    stayed positive and the drape swayed on: the 3 cm dress settled after 17.3k steps instead
+    of 1.3k. Returns the number of vertices whose velocity changed."""
+    n = 0
+    for i in range(x.shape[0]):
+        dx = x[i, 0] - x_before[i, 0]
+        dy = x[i, 1] - x_before[i, 1]
+        dz = x[i, 2] - x_before[i, 2]
+        dd = dx * dx + dy * dy + dz * dz
+        if dd > 0.0:
+            vd = v[i, 0] * dx + v[i, 1] * dy + v[i, 2] * dz
+            if vd < 0.0:
+                c = vd / dd
+                v[i, 0] -= c * dx
+                v[i, 1] -= c * dy
+                v[i, 2] -= c * dz
+                n += 1
+    return n
+
+
 @njit(fastmath=True, cache=True, inline="always")
 def _n_corners(p, n, nq):
     """Checked point p: a vertex (p < n, 1 corner), a quad midpoint (4) or a triangle centroid (3)."""
