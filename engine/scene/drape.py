@@ -72,6 +72,10 @@ class DrapeOptions:
     # hanging. Not for every garment: at 500-1000 x the shirt's underarm seams on a scan with
     # its arms 2.4 cm from the torso closed as loaded (instead of stalling, which raises the
     # arms: engine.scene.arms), and the drape ended 7-17 % stretched between arm and torso
+    retry_stall: float = 0.25  # s: ... and whose largest gap shrank < 1 mm over each of two windows
+    # this long (from 2 x this on). Measured on that T-shirt at 1.5 cm: the first pull's widest
+    # gap stayed 9.0-9.3 cm from ~0.15 s of sewing on; judged over 0.5 s windows from 1 s, the
+    # retry began after 8.6 s of wall time (13.3 s in all)
     calm_start: float = 0.05  # s: sewing starts at far_sew_damping for this long, so the strain a
     # placement leaves (a catalogue trouser's crotch, wrapped between the legs, starts up to 60 %
     # stretched) relaxes without flinging the cloth: measured on default:male's M trousers (sewn
@@ -207,10 +211,13 @@ def sew_and_drape(garment: Garment, collider: Collider | None, options: DrapeOpt
             solver.strain_guard = None  # sewing stretches cloth by design; the guard and the strain
             solver.recover = 1e9  # recovery are for the drape (a new solver is made after welding)
             solver.sewing = (pairs, welded, o.sew_tau, vmax)
-            stall = deque(maxlen=2 * max(1, int(round(o.snap_stall / (check_every * dt)))))  # largest open gaps
-            # (with a second pull to come, a stall is judged after 1 s rather than snap_after: a flat
-            # layout that closes at all closes in 0.1-0.4 s)
-            snap_from = int((min(o.snap_after, 1.0) if attempt + 1 < len(pulls) else o.snap_after) / dt)
+            # the largest open gaps over two stall windows; with a second pull to come, the
+            # windows are retry_stall long and a stall is judged from 2 x retry_stall on, not
+            # after snap_after (a flat layout that closes at all closes in 0.1-0.4 s)
+            retry = attempt + 1 < len(pulls)
+            window = min(o.snap_stall, o.retry_stall) if retry else o.snap_stall
+            stall = deque(maxlen=2 * max(1, int(round(window / (check_every * dt)))))
+            snap_from = int((min(o.snap_after, 2 * window) if retry else o.snap_after) / dt)
             gave_up = None  # (simulated s, smallest and largest open gap of the last snap_stall) when stuck
             calm = int(round(o.calm_start / dt))
             for it in range(budget):
