@@ -573,7 +573,7 @@ def pattern_placement(spec, body: Body):
     rel = spec.properties.curvature_coords == "relative"
     outlines = {n: own(n, pn, geo.outline(pn, spec.scale, rel)) for n, pn in spec.pattern.panels.items()}
     sleeves = {n: s for n, s in ((n, sleeve_side(o)) for n, o in outlines.items()) if s is not None}
-    arms = _arms_of(body) if sleeves else None
+    arms = _arms_of(body, m) if sleeves else None
     armpit = floor + float(m.armpit_height)
 
     def place(name, panel, uv):
@@ -617,25 +617,19 @@ CARRIED_HINT = ("This pattern was laid out round GarmentCode's mean body and car
                 "made for, or make the pattern in GarmentCode for this body's measurements")
 
 
-def _arms_of(body: Body) -> dict[str, np.ndarray] | None:
+def _arms_of(body: Body, m) -> dict[str, np.ndarray] | None:
     """The body's arm joints (engine.pattern.catalogue.arm_joints): from its rig, or from the
-    default skeleton fitted to it (a scan); None when neither can be had."""
+    default skeleton fitted to it (a scan; the chart of its measurements `m` picks which);
+    None when neither can be had."""
     from engine.errors import TryonError
-    from engine.pattern.catalogue import arm_joints
+    from engine.pattern.catalogue import arm_joints, chart_of
 
     arms = arm_joints(body)
     if arms is None:
         from engine.body.fit import fit_rig
-        from engine.body.measure import measure
-
-        from engine.pattern.catalogue import chart_of
 
         try:
-            men = chart_of(body, measure(body)) == "men"
-        except TryonError:
-            men = False
-        try:
-            arms = arm_joints(fit_rig(body, "male" if men else "female"))
+            arms = arm_joints(fit_rig(body, "male" if chart_of(body, m) == "men" else "female"))
         except TryonError:
             return None
     return arms

@@ -9,6 +9,9 @@ from engine.errors import InputError
 from engine.pattern.io import load_pattern
 
 
+PATTERN_SIZE_ADVICE = "a pattern has one size: grade it larger for this body"
+
+
 def resolve_garment(arg: str, body: Body, size: str | None = "M"):
     """Returns (PatternSpec, placement function or None for the spec's own, display name).
     size: catalogue size; None means the default (M) for catalogue garments."""
@@ -43,7 +46,7 @@ def add_size_hint(err: Exception, arg: str, body: Body, size: str | None) -> Non
         return
     if arg not in CATALOGUE:  # a pattern file has one size: "try a larger size" means grading it
         msg = str(err).replace("(try a larger size)", "(a pattern has one size: grade it larger)")
-        msg = msg.replace("; try a larger size", "; a pattern has one size: grade it larger for this body")
+        msg = msg.replace("; try a larger size", f"; {PATTERN_SIZE_ADVICE}")
         err.args = (msg,) + tuple(err.args[1:])
         return
     size = size or "M"

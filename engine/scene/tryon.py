@@ -254,7 +254,9 @@ def fit_warnings(strain: float, fabric, settled: bool, budget: float, pattern_fi
     is to grade it larger, not to pick a larger size."""
     out = []
     if strain > fabric.strain_threshold + TIGHT:
-        advice = "a pattern has one size: grade it larger for this body" if pattern_file else "try a larger size"
+        from engine.scene.garments import PATTERN_SIZE_ADVICE
+
+        advice = PATTERN_SIZE_ADVICE if pattern_file else "try a larger size"
         out.append(f"the garment is tight: stretched {100 * strain:.0f} % where {fabric.name} allows "
                    f"{100 * fabric.strain_threshold:.0f} % ({advice})")
     if not settled:
