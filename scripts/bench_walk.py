@@ -55,6 +55,9 @@ def main() -> None:
             t0 = time.perf_counter()
             res, rep = run_tryon(body, spec, h=h, place=place, source=label)
             t_dress = time.perf_counter() - t0
+            if not rows:  # compile the walking kernels first (a cold numba cache), outside the figures
+                walk_cloth(body, res, WalkOptions(seconds=0.1), texel=0.005, tol=res.model.params.tolerance,
+                           track=track)
             for reuse in (True, False):
                 o = WalkOptions(seconds=a.seconds, reuse_maps=reuse)
                 w = walk_cloth(body, res, o, texel=0.005, tol=res.model.params.tolerance, track=track)

@@ -118,8 +118,37 @@ def test_track_collider_reuses_maps_of_a_periodic_track():
             col.set_time(i / track.fps)
             col.query(np.zeros((1, 3)))
         assert col.stats["renders"] == 4 and col.stats["reuses"] == 8
+        # a reused frame answers from its float16 copy, expanded exactly
+        maps, surf16, vel16 = col._kept[col._k]
+        assert col.maps is maps and np.array_equal(maps.surf, surf16.astype(np.float32), equal_nan=True)
+        assert np.array_equal(maps.vel, vel16.astype(np.float32), equal_nan=True)
     finally:
         r.release()
+
+
+def test_half_conversions_match_numpy():
+    """The kept maps' float16 copies (moving._compacted) and their expansion (moving._expanded)
+    give numpy's astype bit for bit: random values over the half's whole range (subnormals,
+    overflow, ties), every float32 bit pattern class, and the special values."""
+    from engine.collide.moving import _compacted, _expanded
+
+    rng = np.random.default_rng(3)
+    scaled = (rng.standard_normal(200_000) * 10.0 ** rng.integers(-9, 6, 200_000)).astype(np.float32)
+    bits = rng.integers(0, 2 ** 32, 200_000, dtype=np.uint64).astype(np.uint32).view(np.float32)
+    special = np.array([np.inf, -np.inf, np.nan, 0.0, -0.0, 65504, 65519.99, 65520, 6e-8, 3e-8, 2.98e-8,
+                        5.96e-8, 1e-45, -1e-45, 1 + 2 ** -11, 1 + 3 * 2 ** -11], np.float32)
+    for a in (scaled, bits, special):
+        with np.errstate(all="ignore"):
+            want = a.astype(np.float16)
+        got = _compacted(a.reshape(-1, 4) if len(a) % 4 == 0 else a).reshape(-1)
+        num = ~np.isnan(want)
+        assert np.array_equal(got.view(np.uint16)[num], want.view(np.uint16)[num])
+        assert np.array_equal(np.isnan(got), ~num)
+    every_half = np.arange(2 ** 16, dtype=np.uint16).view(np.float16)
+    out = _expanded(every_half, None)
+    assert np.array_equal(out.view(np.uint32), every_half.astype(np.float32).view(np.uint32))
+    assert _expanded(every_half, out) is out  # the buffer is reused
+    assert np.array_equal(_compacted(special.astype(np.float64)), special.astype(np.float16), equal_nan=True)
 
 
 def test_anim_glb_round_trip(tmp_path):
