@@ -108,9 +108,9 @@ def _query_cached(local, t, frame, tol, widened, shift_t, root_v, vmax, reach, m
 @serial_kernel
 def _expand_half(bits, table, out):
     """out[i] = table[bits[i]]: float16 values (as their uint16 bits) to float32 through the
-    65,536-entry table of every half's value (_HALF_TABLE) -- exact, as numpy's astype, and
-    measured 5x faster (numpy converts each element in software: 14 ms for the 1.4 million
-    values of one walking frame's maps)."""
+    65,536-entry table of every half's value (_HALF_TABLE) -- exact, as numpy's astype, which
+    converts each element in software: measured on the 1.4 million values of one walking
+    frame's maps, 0.7 ms against numpy's 12.8-14 ms."""
     for i in range(bits.shape[0]):
         out[i] = table[bits[i]]
 
@@ -123,7 +123,7 @@ def _compact_half(bits, out):
     """out[i] = the float16 bits of the float32 whose bits are bits[i] (uint32), rounded to
     nearest, ties to even; overflow to infinity, NaN stays NaN, underflow to subnormals and
     zero -- IEEE 754's conversion, as numpy's astype does it (tests/test_walk.py checks them
-    equal), 10x faster than numpy's per-element conversion."""
+    equal): measured on one walking frame's maps, 3 ms against numpy's 8 ms."""
     for i in range(bits.shape[0]):
         f = bits[i]
         sgn = np.uint16((f & 0x80000000) >> 16)
