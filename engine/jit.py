@@ -21,8 +21,10 @@ from numba.core.errors import NumbaPerformanceWarning
 warnings.filterwarnings("ignore", category=NumbaPerformanceWarning, message=r"(?s).*parallel=True.*")
 
 
-def serial_kernel(fn=None, *, fastmath: bool = True):
-    """@serial_kernel or @serial_kernel(fastmath=False): njit(cache=True, parallel=True, ...)."""
+def serial_kernel(fn=None, *, fastmath: bool = True, error_model: str = "python"):
+    """@serial_kernel or @serial_kernel(fastmath=False): njit(cache=True, parallel=True, ...).
+    error_model="numpy": a division by zero gives inf/nan instead of raising, which lets LLVM
+    vectorize a loop that divides (the check is a branch in every iteration)."""
     def wrap(f):
-        return njit(cache=True, fastmath=fastmath, parallel=True)(f)
+        return njit(cache=True, fastmath=fastmath, parallel=True, error_model=error_model)(f)
     return wrap(fn) if fn is not None else wrap

@@ -65,6 +65,8 @@ def main() -> None:
     from engine.scene.garments import resolve_garment
 
     body = resolve_body(args.body)
+    print("warming up: a coarse skirt, so that no row below includes compiling the kernels", file=sys.stderr)
+    run(body, "skirt", 0.06)
     rows = []
     for name in args.garments.split(","):
         if name not in CATALOGUE:

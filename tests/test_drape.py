@@ -359,9 +359,10 @@ def test_sewing_gives_up_when_the_seams_stop_closing():
 
     body = default_body("male")
     spec, place, name = resolve_garment("skirt", body, "XS")
+    side = r"(front\[1\]-back\[4\]|front\[5\]-back\[0\]) \(\d+.\d cm\)"  # either side seam, or both
     with pytest.raises(SimulationError, match=r"^sewing stopped closing after [23].\d s of simulated time \(the widest "
-                                              r"gap stayed \d+.\d-\d+.\d cm for 0.5 s\); open seams: front\[1\]-back\[4\] "
-                                              r"\(\d+.\d cm\)\. The garment may be too small") as e:
+                                              r"gap stayed \d+.\d-\d+.\d cm for 0.5 s\); open seams: "
+                                              + side + "(, " + side + r")?\. The garment may be too small") as e:
         run_tryon(body, spec, h=0.03, place=place, source=name)
     assert e.value.too_small and e.value.positions.shape[1] == 3
 

@@ -82,7 +82,8 @@ def test_serial_kernels_compile_without_parallel_loops():
             diag = (f.overloads[sig].metadata or {}).get("parfor_diagnostics")
             if diag is None:
                 if fresh is None:
-                    fresh = njit(parallel=True, fastmath=f.targetoptions.get("fastmath", False))(f.py_func)
+                    fresh = njit(parallel=True, fastmath=f.targetoptions.get("fastmath", False),
+                                 error_model=f.targetoptions.get("error_model", "python"))(f.py_func)
                 fresh.compile(sig)
                 diag = fresh.overloads[sig].metadata["parfor_diagnostics"]
             assert not diag.initial_parfors, f"{name} has a parallel loop (array expression / np.zeros?)"

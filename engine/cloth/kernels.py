@@ -31,67 +31,130 @@ MIN_NZ = 0.2  # see _depth_rate
 VM_MODES = {"zero": VM_ZERO, "average": VM_AVERAGE, "directional": VM_DIRECTIONAL, "provot": VM_PROVOT}
 
 
-@serial_kernel
-def eval_forces_and_integrate(x, v, inv_mass, mass, springs, rest, k, spring_c, gravity, damping,
-                              contact, contact_n, mu, dt, f_out, active, threshold, work, geo):
-    """Springs (eq. 2) with damping along each spring (spring_c, N.s/m) -- one pass over the
-    springs, each adding its force to both ends (serial, so the scatter is race-free and every
-    length is computed once) -- gravity, viscous damping, then the reaction force of seed 000
-    eq. 16 where the vertex touched the body in the previous step (cancel the force into the
-    body, Coulomb friction on the tangential part), then the velocity half of eq. 3:
-    v += dt f / m. f_out keeps the force for diagnostics.
-    The same pass lists the active springs longer than (1 + threshold) x rest in `work` (their
-    directions and excesses in `geo`, see _spring_geo) and returns their count: the velocity
-    modification that follows (modify_velocities with n_known) needs no sweep of its own, as
-    positions do not move in between."""
+@serial_kernel(error_model="numpy")
+def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprops, gravity, damping,
+                              contact, contact_n, mu, dt, f_out, work, geo, soa, tmp, lengths):
+    """Springs (eq. 2) with damping along each spring, gravity, viscous damping, then the
+    reaction force of seed 000 eq. 16 where the vertex touched the body in the previous step
+    (cancel the force into the body, Coulomb friction on the tangential part), then the velocity
+    half of eq. 3: v += dt f / m. f_out keeps the force for diagnostics.
+
+    The springs come in the order of engine.cloth.model.SpringRuns (sp, perm, runs, n_run;
+    sprops (4, S): rest length, stiffness, damping and the length past which the spring is
+    listed (below; inf for a spring the strain limit leaves alone), in that order): most lie in runs
+    (a0 + t, b0 + t), t < L -- a row of the grid against the next one -- so positions and
+    velocities are copied into soa (9, N: x, y, z, vx, vy, vz, fx, fy, fz) and each run is one
+    loop over contiguous slices, which LLVM turns into vector instructions (no gathers); its
+    forces go to tmp (3, >= longest run) first and are then added to both ends' rows (adding to
+    both in the same loop would make each iteration depend on the last when b0 - a0 is small).
+    The springs outside runs are done one by one. Measured on the dress (4,374 vertices, 25.5k
+    springs, 93 % in runs): 0.12 ms instead of 0.25 ms for the one-by-one pass over all springs.
+
+    The same pass lists the springs longer than their listing length in `work` (their
+    model indices; directions and excesses in `geo`, see _store_geo) and returns their count:
+    the velocity modification that follows (modify_velocities with n_known) needs no sweep of
+    its own, as positions do not move in between. A run keeps its lengths in `lengths` (S,) and
+    counts its long springs (a reduction, which stays a vector loop); only a run with any is
+    gone through again to list them."""
     n = x.shape[0]
+    xs, ys, zs = soa[0], soa[1], soa[2]
+    vx, vy, vz = soa[3], soa[4], soa[5]
+    fx, fy, fz = soa[6], soa[7], soa[8]
     for i in range(n):
-        f_out[i, 0] = mass[i] * gravity[0] - damping * mass[i] * v[i, 0]
-        f_out[i, 1] = mass[i] * gravity[1] - damping * mass[i] * v[i, 1]
-        f_out[i, 2] = mass[i] * gravity[2] - damping * mass[i] * v[i, 2]
+        xs[i] = x[i, 0]
+        ys[i] = x[i, 1]
+        zs[i] = x[i, 2]
+        vx[i] = v[i, 0]
+        vy[i] = v[i, 1]
+        vz[i] = v[i, 2]
+        fx[i] = mass[i] * gravity[0] - damping * mass[i] * v[i, 0]
+        fy[i] = mass[i] * gravity[1] - damping * mass[i] * v[i, 1]
+        fz[i] = mass[i] * gravity[2] - damping * mass[i] * v[i, 2]
+    rest, k, spring_c, limits = sprops[0], sprops[1], sprops[2], sprops[3]
+    tx, ty, tz = tmp[0], tmp[1], tmp[2]
     n_act = 0
-    for s in range(springs.shape[0]):
-        a = springs[s, 0]
-        b = springs[s, 1]
-        dx = x[b, 0] - x[a, 0]
-        dy = x[b, 1] - x[a, 1]
-        dz = x[b, 2] - x[a, 2]
-        length = np.sqrt(dx * dx + dy * dy + dz * dz)
-        limit = (1.0 + threshold) * rest[s]
-        if active[s] and length > limit:
-            work[n_act] = s
-            _store_geo(geo, n_act, dx, dy, dz, length, limit)
-            n_act += 1
-        if length > 1e-12:
+    for r in range(runs.shape[0]):
+        s0, a0, b0, m = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3]
+        xa, ya, za = xs[a0:a0 + m], ys[a0:a0 + m], zs[a0:a0 + m]
+        xb, yb, zb = xs[b0:b0 + m], ys[b0:b0 + m], zs[b0:b0 + m]
+        ua, wa, qa = vx[a0:a0 + m], vy[a0:a0 + m], vz[a0:a0 + m]
+        ub, wb, qb = vx[b0:b0 + m], vy[b0:b0 + m], vz[b0:b0 + m]
+        r_, k_, c_, lim_, l_ = rest[s0:s0 + m], k[s0:s0 + m], spring_c[s0:s0 + m], limits[s0:s0 + m], lengths[s0:s0 + m]
+        over = 0
+        for t in range(m):
+            dx = xb[t] - xa[t]
+            dy = yb[t] - ya[t]
+            dz = zb[t] - za[t]
+            l2 = dx * dx + dy * dy + dz * dz
+            inv = 1.0 / np.sqrt(l2 + 1e-30)
+            length = l2 * inv
             # spring force plus damping of the spring's rate of stretch (along the spring)
-            rate = ((v[b, 0] - v[a, 0]) * dx + (v[b, 1] - v[a, 1]) * dy + (v[b, 2] - v[a, 2]) * dz) / length
+            rate = ((ub[t] - ua[t]) * dx + (wb[t] - wa[t]) * dy + (qb[t] - qa[t]) * dz) * inv
+            c = (k_[t] * (length - r_[t]) + c_[t] * rate) * inv
+            tx[t] = c * dx
+            ty[t] = c * dy
+            tz[t] = c * dz
+            l_[t] = length
+            over += length > lim_[t]
+        if over:
+            for s in range(s0, s0 + m):
+                if lengths[s] > limits[s]:
+                    a = sp[s, 0]
+                    b = sp[s, 1]
+                    work[n_act] = perm[s]
+                    _store_geo(geo, n_act, xs[b] - xs[a], ys[b] - ys[a], zs[b] - zs[a], lengths[s], limits[s])
+                    n_act += 1
+        fa, ga, ha = fx[a0:a0 + m], fy[a0:a0 + m], fz[a0:a0 + m]
+        for t in range(m):
+            fa[t] += tx[t]
+            ga[t] += ty[t]
+            ha[t] += tz[t]
+        fb, gb, hb = fx[b0:b0 + m], fy[b0:b0 + m], fz[b0:b0 + m]
+        for t in range(m):
+            fb[t] -= tx[t]
+            gb[t] -= ty[t]
+            hb[t] -= tz[t]
+    for s in range(n_run, sp.shape[0]):
+        a = sp[s, 0]
+        b = sp[s, 1]
+        dx = xs[b] - xs[a]
+        dy = ys[b] - ys[a]
+        dz = zs[b] - zs[a]
+        length = np.sqrt(dx * dx + dy * dy + dz * dz)
+        if length > 1e-12:
+            limit = limits[s]
+            if length > limit:
+                work[n_act] = perm[s]
+                _store_geo(geo, n_act, dx, dy, dz, length, limit)
+                n_act += 1
+            rate = ((vx[b] - vx[a]) * dx + (vy[b] - vy[a]) * dy + (vz[b] - vz[a]) * dz) / length
             c = (k[s] * (length - rest[s]) + spring_c[s] * rate) / length
-            f_out[a, 0] += c * dx
-            f_out[a, 1] += c * dy
-            f_out[a, 2] += c * dz
-            f_out[b, 0] -= c * dx
-            f_out[b, 1] -= c * dy
-            f_out[b, 2] -= c * dz
+            fx[a] += c * dx
+            fy[a] += c * dy
+            fz[a] += c * dz
+            fx[b] -= c * dx
+            fy[b] -= c * dy
+            fz[b] -= c * dz
     for i in range(n):
-        fx, fy, fz = f_out[i, 0], f_out[i, 1], f_out[i, 2]
+        fx_, fy_, fz_ = fx[i], fy[i], fz[i]
         if contact[i]:
             nx, ny, nz = contact_n[i, 0], contact_n[i, 1], contact_n[i, 2]
-            fn = fx * nx + fy * ny + fz * nz
+            fn = fx_ * nx + fy_ * ny + fz_ * nz
             if fn < 0.0:  # pushing into the body: the body pushes back (eq. 16, -f_n)
-                tx, ty, tz = fx - fn * nx, fy - fn * ny, fz - fn * nz
-                ft = np.sqrt(tx * tx + ty * ty + tz * tz)
+                tx_, ty_, tz_ = fx_ - fn * nx, fy_ - fn * ny, fz_ - fn * nz
+                ft = np.sqrt(tx_ * tx_ + ty_ * ty_ + tz_ * tz_)
                 # friction: -C_fric f_t with C_fric = min(1, mu |f_n| / |f_t|) (Coulomb)
                 scale = 0.0
                 if ft > 1e-20:
                     scale = max(0.0, 1.0 - mu * (-fn) / ft)
-                fx, fy, fz = tx * scale, ty * scale, tz * scale
-                f_out[i, 0] = fx
-                f_out[i, 1] = fy
-                f_out[i, 2] = fz
+                fx_, fy_, fz_ = tx_ * scale, ty_ * scale, tz_ * scale
+        f_out[i, 0] = fx_
+        f_out[i, 1] = fy_
+        f_out[i, 2] = fz_
         w = dt * inv_mass[i]
-        v[i, 0] += w * fx
-        v[i, 1] += w * fy
-        v[i, 2] += w * fz
+        v[i, 0] += w * fx_
+        v[i, 1] += w * fy_
+        v[i, 2] += w * fz_
     return n_act
 
 

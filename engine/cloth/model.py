@@ -24,6 +24,7 @@ for a step 1.03-1.28 x longer.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -105,6 +106,57 @@ class ClothModel:
     @property
     def n(self) -> int:
         return len(self.mass)
+
+    @cached_property
+    def runs(self) -> "SpringRuns":
+        """The springs in the order of the force pass (see SpringRuns), made once per model."""
+        return spring_runs(self.springs)
+
+
+MIN_RUN = 8  # shortest run of springs the force pass takes as one vector loop (4 doubles a
+# vector; a run's own cost, ~20 ns, outweighs the gain below this)
+
+
+@dataclass(frozen=True)
+class SpringRuns:
+    """The springs ordered for the force pass (engine.cloth.kernels.eval_forces_and_integrate):
+    runs first -- springs (a0 + t, b0 + t) for t < L, L >= MIN_RUN, as a grid row and the next
+    row (or the same row shifted) give them -- then the rest.
+    perm (S,) int64: the model's index of each spring in this order; springs (S, 2) int32 =
+    model springs[perm], ends as in the model; runs (R, 4) int64: (first position in this order,
+    a0, b0, L); n_run: the springs in runs (they come first)."""
+
+    perm: np.ndarray
+    springs: np.ndarray
+    runs: np.ndarray
+    n_run: int
+
+    @property
+    def longest(self) -> int:
+        return int(self.runs[:, 3].max(initial=1))
+
+
+def spring_runs(springs: np.ndarray, min_run: int = MIN_RUN) -> SpringRuns:
+    """Find the runs: springs sorted by end-to-end offset b - a, then by a; a run is a stretch of
+    that order where a goes up by one each spring."""
+    s = springs.astype(np.int64).reshape(-1, 2)
+    d = s[:, 1] - s[:, 0]
+    order = np.lexsort((s[:, 0], d))
+    a, dd = s[order, 0], d[order]
+    brk = np.ones(len(order), dtype=np.bool_)
+    brk[1:] = (dd[1:] != dd[:-1]) | (a[1:] != a[:-1] + 1)
+    starts = np.flatnonzero(brk)
+    lens = np.diff(np.r_[starts, len(order)])
+    keep = lens >= min_run
+    st, ln = starts[keep], lens[keep]
+    in_run = np.zeros(len(order), dtype=np.bool_)
+    pos = np.repeat(st, ln) + (np.arange(ln.sum()) - np.repeat(np.cumsum(ln) - ln, ln))
+    in_run[pos] = True
+    perm = np.concatenate([order[pos], order[~in_run]])
+    first = np.cumsum(ln) - ln
+    runs = np.stack([first, s[order[st], 0], s[order[st], 1], ln], axis=1).astype(np.int64).reshape(-1, 4)
+    return SpringRuns(perm=perm.astype(np.int64), springs=np.ascontiguousarray(springs[perm]).astype(np.int32),
+                      runs=runs, n_run=int(ln.sum()))
 
 
 @dataclass

@@ -83,6 +83,13 @@ class ClothSolver:
         n = model.n
         self.active = model.kind != FLEXION  # flexion springs may shorten/lengthen with folds
         self.f = np.zeros((n, 3))
+        # the force pass's spring order and buffers (engine.cloth.model.SpringRuns)
+        r = model.runs
+        limit = np.where(self.active, (1.0 + model.fabric.strain_threshold) * model.rest, np.inf)
+        self._sprops = np.ascontiguousarray(np.stack([model.rest, model.stiffness, model.spring_c, limit])[:, r.perm])
+        self._soa = np.zeros((9, n))
+        self._run_tmp = np.zeros((3, r.longest))
+        self._lengths = np.zeros(len(model.springs))
         self.vm_work = np.zeros(len(model.springs), dtype=np.int32)
         self.vm_geo = np.zeros((len(model.springs), 4))  # the listed springs' direction, excess
         self.contact = np.zeros(n, dtype=np.bool_)
@@ -112,11 +119,12 @@ class ClothSolver:
         t0 = time.perf_counter()
         # forces (eq. 2, gravity, damping, reaction eq. 16) and v += dt a (eq. 3); the same pass
         # lists the over-elongated springs for the velocity modification
-        n_over = K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, m.springs, m.rest, m.stiffness,
-                                             m.spring_c, g, p.damping * damping_scale,
+        r = m.runs
+        n_over = K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, r.springs, r.perm, r.runs, r.n_run,
+                                             self._sprops, g, p.damping * damping_scale,
                                              self.contact, self.contact_n, m.fabric.friction * friction_scale, dt,
-                                             self.f, self.active, m.fabric.strain_threshold, self.vm_work,
-                                             self.vm_geo)
+                                             self.f, self.vm_work, self.vm_geo,
+                                             self._soa, self._run_tmp, self._lengths)
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 §3)
         n_act = K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
                                     self.mode, g, dt, self.body_v, p.vm_passes,
