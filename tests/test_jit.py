@@ -57,11 +57,7 @@ def test_serial_kernels_compile_without_parallel_loops():
     K.kinetic_energy(state.v, m.mass), K.max_strain(state.x, m.springs, m.rest, solver.active)
     K.provot_positions(state.x, m.springs, m.rest, solver.active, 0.05, m.inv_mass, 2, solver.vm_work, False,
                        solver.contact, solver.contact_n)
-    K.inelastic_guard(state.x, state.x.copy(), state.v)
-    solver.strain_guard = 0.0
-    r = m.runs
-    K.strain_guard(state.x, state.v, r.springs, r.runs, r.n_run, solver._guard_limits_for(), m.inv_mass, 2,
-                   solver.vm_work, solver.contact, solver.contact_n, 1e-4, *solver._guard_bufs)
+    K.inelastic_guard(state.x, solver.x_guard, state.v)
     # the response on its own (the solver's contact_rounds does the same work; tests/test_cloth.py
     # compares them), on the last step's points
     npt = len(solver.points)
@@ -93,7 +89,7 @@ def test_serial_kernels_compile_without_parallel_loops():
             assert not diag.initial_parfors, f"{name} has a parallel loop (array expression / np.zeros?)"
         checked.append(name)
     for must in ("modify_velocities", "eval_forces_and_integrate", "collision_response", "query_batch_serial",
-                 "pull_seams", "inelastic_guard", "strain_guard"):
+                 "pull_seams", "inelastic_guard"):
         assert any(n.endswith("." + must) for n in checked), (must, checked)
 
 

@@ -106,8 +106,7 @@ class ClothSolver:
         self.last_hits = 0
         self.strain_guard = p.strain_guard  # the drape turns it off while sewing
         self.guarded = 0  # springs the strain guard shortened in the last step
-        self._guard_bufs = (np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.int32), np.zeros((n, 3)))  # K.strain_guard
-        self._guard_limits = (None, None)  # (guard, limits in SpringRuns order)
+        self.x_guard = np.zeros((n, 3))  # positions before the guard moved them (K.inelastic_guard)
         self.recover = p.recover  # ... and the strain recovery (it would fight the seam pull)
         self.sewing = None  # (pairs, welded, tau, vmax) while sewing: see engine.cloth.welds
         self._q, self._q_age, self._q_version = None, 0, None  # the last map answer (see _contacts)
@@ -163,24 +162,18 @@ class ClothSolver:
                                m.inv_mass, p.vm_passes, self.vm_work, False, self.contact, self.contact_n, np.inf)
         elif self.strain_guard is not None:
             # what the velocity modification could not hold (the body pushing a band outward);
-            # the velocity that would stretch the guarded springs again goes (K.strain_guard)
-            r = m.runs
-            self.guarded = K.strain_guard(state.x, state.v, r.springs, r.runs, r.n_run, self._guard_limits_for(),
-                                          m.inv_mass, p.vm_passes, self.vm_work, self.contact, self.contact_n,
-                                          p.guard_step, *self._guard_bufs)
+            # the velocity that would stretch the guarded springs again goes (K.inelastic_guard)
+            self.x_guard[:] = state.x
+            self.guarded = K.provot_positions(state.x, m.springs, m.rest, self.active,
+                                              m.fabric.strain_threshold + self.strain_guard, m.inv_mass,
+                                              p.vm_passes, self.vm_work, True, self.contact, self.contact_n,
+                                              p.guard_step)
+            if self.guarded:
+                K.inelastic_guard(state.x, self.x_guard, state.v)
         t3 = time.perf_counter()
         self.timing["cloth"] += (t1 - t0) + (t3 - t2)
         self.timing["collision"] += t2 - t1
         self.iterations += 1
-
-    def _guard_limits_for(self) -> np.ndarray:
-        """(S,) the strain guard's spring lengths in SpringRuns order (inf: not guarded), made
-        again only when strain_guard changes."""
-        if self._guard_limits[0] != self.strain_guard:
-            m = self.model
-            lim = np.where(self.active, (1.0 + m.fabric.strain_threshold + self.strain_guard) * m.rest, np.inf)
-            self._guard_limits = (self.strain_guard, np.ascontiguousarray(lim[m.runs.perm]))
-        return self._guard_limits[1]
 
     def _contacts(self):
         """The collider's answer for self.points. Asking the maps is the costliest part of a step,
