@@ -189,8 +189,8 @@ def test_a_garment_that_slides_off_the_body_is_an_error_not_a_result(tmp_path):
 def test_a_garment_far_too_small_is_refused():
     """The sample scan's XS sleeveless shirt (chart bust 82 cm on a 97.5 cm bust): its side
     seams cannot close. Sewing gives up once they stopped closing, more than snap_gap open,
-    after snap_after (2.0 s of simulated time, 15 s of wall time; at the 4 s budget they were
-    still 2.1-2.3 cm open, 25 s): a clear error that says it may be too small, with a picture's
+    from snap_after on (measured: after 2.0 s and, with the force pass's sums in another order,
+    2.4 s of simulated time; at the 4 s budget they were still 2.1-2.3 cm open): a clear error that says it may be too small, with a picture's
     positions, marked too_small (for --size auto and the size hint). (Before the straps leaned
     over the shoulders its seams closed and the drape refused it as stretched at least 16 %;
     the rule that does that is tested below.)"""
@@ -201,7 +201,7 @@ def test_a_garment_far_too_small_is_refused():
 
     body = resolve_body(str(SAMPLE_BODY))
     spec, place, name = resolve_garment("sleeveless-shirt", body, "XS")
-    with pytest.raises(SimulationError, match=r"sewing stopped closing after 2.0 s of simulated time \(the widest "
+    with pytest.raises(SimulationError, match=r"sewing stopped closing after [23]\.\d s of simulated time \(the widest "
                                               r"gap stayed .* open seams: .* may be too small for this body "
                                               r"\(try a larger size\)") as e:
         run_tryon(body, spec, place=place, source=name)

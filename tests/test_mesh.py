@@ -268,3 +268,24 @@ def test_build_garment_refusals(skirt):
         build_garment(skirt, h=0.0)
     with pytest.raises(InputError, match="out of range"):
         build_garment(skirt, h=1.0)
+
+
+def test_farther_than_matches_every_distance():
+    """mesh.farther_than (the lattice points kept away from the outline) against all the
+    point-segment distances in numpy, on a wavy closed outline and points spread across and
+    around it, at two radii."""
+    from engine.garment.mesh import farther_than
+
+    rng = np.random.default_rng(7)
+    th = np.linspace(0, 2 * np.pi, 300, endpoint=False)
+    poly = np.stack([(0.3 + 0.05 * np.sin(5 * th)) * np.cos(th), (0.2 + 0.03 * np.cos(7 * th)) * np.sin(th)], 1)
+    p = rng.uniform(-0.4, 0.4, (4000, 2))
+    a, b = poly, np.roll(poly, -1, axis=0)
+    ab, ap = b - a, p[:, None, :] - a[None]
+    t = np.clip((ap * ab[None]).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-30)[None], 0.0, 1.0)
+    dist = np.linalg.norm(ap - t[..., None] * ab[None], axis=-1).min(axis=1)
+    for r in (0.0075, 0.03):
+        got = farther_than(p, poly, r, np.empty(len(p), dtype=np.bool_))
+        want = dist > r
+        assert 0.05 < want.mean() < 0.95
+        assert np.array_equal(got, want)

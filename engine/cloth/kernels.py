@@ -33,7 +33,8 @@ VM_MODES = {"zero": VM_ZERO, "average": VM_AVERAGE, "directional": VM_DIRECTIONA
 
 @serial_kernel(error_model="numpy")
 def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprops, gravity, damping,
-                              contact, contact_n, mu, dt, f_out, work, geo, soa, tmp, lengths):
+                              contact, contact_n, mu, dt, f_out, work, geo, soa, tmp, lengths, listed, listed_words,
+                              geo_s):
     """Springs (eq. 2) with damping along each spring, gravity, viscous damping, then the
     reaction force of seed 000 eq. 16 where the vertex touched the body in the previous step
     (cancel the force into the body, Coulomb friction on the tangential part), then the velocity
@@ -55,7 +56,12 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
     the velocity modification that follows (modify_velocities with n_known) needs no sweep of
     its own, as positions do not move in between. A run keeps its lengths in `lengths` (S,) and
     counts its long springs (a reduction, which stays a vector loop); only a run with any is
-    gone through again to list them."""
+    gone through again to mark them (listed (>= S, a multiple of 8) uint8 and listed_words, the
+    same memory as uint64; their geo in geo_s (S, 4); both by model index); the list is then
+    made in the model's order -- the order the velocity modification
+    goes through them (measured: listed in the runs' order instead, the drapes changed enough
+    for default:female's M dress at 3 cm to end 6.05 % stretched, reported tight, where it
+    ended at 5.93 % before; in model order 5.94 %, in as many iterations as before)."""
     n = x.shape[0]
     xs, ys, zs = soa[0], soa[1], soa[2]
     vx, vy, vz = soa[3], soa[4], soa[5]
@@ -101,8 +107,8 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
                 if lengths[s] > limits[s]:
                     a = sp[s, 0]
                     b = sp[s, 1]
-                    work[n_act] = perm[s]
-                    _store_geo(geo, n_act, xs[b] - xs[a], ys[b] - ys[a], zs[b] - zs[a], lengths[s], limits[s])
+                    listed[perm[s]] = 1
+                    _store_geo(geo_s, perm[s], xs[b] - xs[a], ys[b] - ys[a], zs[b] - zs[a], lengths[s], limits[s])
                     n_act += 1
         fa, ga, ha = fx[a0:a0 + m], fy[a0:a0 + m], fz[a0:a0 + m]
         for t in range(m):
@@ -124,8 +130,8 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
         if length > 1e-12:
             limit = limits[s]
             if length > limit:
-                work[n_act] = perm[s]
-                _store_geo(geo, n_act, dx, dy, dz, length, limit)
+                listed[perm[s]] = 1
+                _store_geo(geo_s, perm[s], dx, dy, dz, length, limit)
                 n_act += 1
             rate = ((vx[b] - vx[a]) * dx + (vy[b] - vy[a]) * dy + (vz[b] - vz[a]) * dz) / length
             c = (k[s] * (length - rest[s]) + spring_c[s] * rate) / length
@@ -135,6 +141,18 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
             fx[b] -= c * dx
             fy[b] -= c * dy
             fz[b] -= c * dz
+    # the list in the model's spring order (the velocity modification's Gauss-Seidel order)
+    k = 0
+    if n_act:
+        for w in range(listed_words.shape[0]):  # eight marks at a time: most words are 0
+            if listed_words[w]:
+                for s in range(8 * w, 8 * w + 8):
+                    if listed[s]:
+                        listed[s] = 0
+                        work[k] = s
+                        for c in range(4):
+                            geo[k, c] = geo_s[s, c]
+                        k += 1
     for i in range(n):
         fx_, fy_, fz_ = fx[i], fy[i], fz[i]
         if contact[i]:

@@ -322,6 +322,9 @@ def seam_flexion(uv: np.ndarray, springs: np.ndarray, kind: np.ndarray, rest: np
     on_seam[seams.ravel()] = True
     st = springs[kind == STRUCTURAL]
     r_st = rest[kind == STRUCTURAL]
+    # only seam vertices are asked (below): their springs, in the same order
+    touch = on_seam[st[:, 0]] | on_seam[st[:, 1]]
+    st, r_st = st[touch], r_st[touch]
     nbrs: dict[int, list[tuple[int, float]]] = {}
     for (i, j), r in zip(st.tolist(), r_st.tolist()):
         nbrs.setdefault(i, []).append((j, r))

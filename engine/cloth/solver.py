@@ -90,6 +90,9 @@ class ClothSolver:
         self._soa = np.zeros((9, n))
         self._run_tmp = np.zeros((3, r.longest))
         self._lengths = np.zeros(len(model.springs))
+        self._listed = np.zeros(-(-len(model.springs) // 8) * 8, dtype=np.uint8)
+        self._listed_words = self._listed.view(np.uint64)
+        self._geo_s = np.zeros((len(model.springs), 4))
         self.vm_work = np.zeros(len(model.springs), dtype=np.int32)
         self.vm_geo = np.zeros((len(model.springs), 4))  # the listed springs' direction, excess
         self.contact = np.zeros(n, dtype=np.bool_)
@@ -124,7 +127,8 @@ class ClothSolver:
                                              self._sprops, g, p.damping * damping_scale,
                                              self.contact, self.contact_n, m.fabric.friction * friction_scale, dt,
                                              self.f, self.vm_work, self.vm_geo,
-                                             self._soa, self._run_tmp, self._lengths)
+                                             self._soa, self._run_tmp, self._lengths, self._listed, self._listed_words,
+                                             self._geo_s)
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 §3)
         n_act = K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
                                     self.mode, g, dt, self.body_v, p.vm_passes,

