@@ -101,33 +101,32 @@ def _side_geometry(x, y, z, surf, side_src, ra, ca, x0, y0, t, r0, cf, cb):
 
 
 @njit(cache=True, inline="always")
-def _contact(x, y, z, tol, surf, kind, side_src, x0, y0, t, h, w, r0, cf, cb):
-    """(found, penetration) of one map: found False when the map has nothing at (x, y)."""
-    k, bil, ra, ca, fx, fy, zf, zb = _sample(x, y, kind, surf, x0, y0, t, h, w, r0, cf, cb)
-    if k <= 0:
-        return False, -np.inf
-    if k == 2:
-        return True, tol + _side_geometry(x, y, z, surf, side_src, ra, ca, x0, y0, t, r0, cf, cb)[0]
-    if z > 0.5 * (zf + zb):
-        return True, zf - z + tol
-    return True, z - zb + tol
-
-
-@njit(cache=True, inline="always")
 def query_point_into(x, y, z, tol, surf, vel, has_vel, kind, side_src, geom, layout,
                      p, status, surface, penetration, normal, velocity, map_index):
     """Answer one point (module doc for the rule) into row p of the output arrays; returns
-    its status. The map is chosen by penetration first (two scalars carried across maps),
-    then only that map is sampled for the surface point, normal and velocity."""
+    its status. The map is chosen by penetration (the largest); each map is sampled once and
+    the chosen one's sample is kept for the surface point, normal and velocity (sampling it
+    again cost ~15 % of a query)."""
     best_pen = -np.inf
     best_m = -1
+    k, bil, ra, ca, fx, fy, zf, zb = 0, False, 0, 0, 0.0, 0.0, 0.0, 0.0
     for m in range(layout.shape[0]):
-        found, pen = _contact(x, y, z, tol, surf, kind, side_src, geom[m, 0], geom[m, 1],
-                              geom[m, 2], layout[m, 0], layout[m, 1], layout[m, 2],
-                              layout[m, 3], layout[m, 4])
-        if found and pen > best_pen:
+        km, bm, ram, cam, fxm, fym, zfm, zbm = _sample(x, y, kind, surf, geom[m, 0], geom[m, 1], geom[m, 2],
+                                                       layout[m, 0], layout[m, 1], layout[m, 2], layout[m, 3],
+                                                       layout[m, 4])
+        if km <= 0:
+            continue
+        if km == 2:
+            pen = tol + _side_geometry(x, y, z, surf, side_src, ram, cam, geom[m, 0], geom[m, 1], geom[m, 2],
+                                       layout[m, 2], layout[m, 3], layout[m, 4])[0]
+        elif z > 0.5 * (zfm + zbm):
+            pen = zfm - z + tol
+        else:
+            pen = z - zbm + tol
+        if pen > best_pen:
             best_pen = pen
             best_m = m
+            k, bil, ra, ca, fx, fy, zf, zb = km, bm, ram, cam, fxm, fym, zfm, zbm
     map_index[p] = best_m
     penetration[p] = best_pen
     for c in range(3):
@@ -139,8 +138,7 @@ def query_point_into(x, y, z, tol, surf, vel, has_vel, kind, side_src, geom, lay
         return 0
     m = best_m
     x0, y0, t = geom[m, 0], geom[m, 1], geom[m, 2]
-    h, w, r0, cf, cb = layout[m, 0], layout[m, 1], layout[m, 2], layout[m, 3], layout[m, 4]
-    k, bil, ra, ca, fx, fy, zf, zb = _sample(x, y, kind, surf, x0, y0, t, h, w, r0, cf, cb)
+    r0, cf, cb = layout[m, 2], layout[m, 3], layout[m, 4]
     if k == 2:
         d, nx, ny, edge, zf, zb, rs, cs = _side_geometry(x, y, z, surf, side_src, ra, ca,
                                                          x0, y0, t, r0, cf, cb)
