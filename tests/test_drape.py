@@ -147,7 +147,6 @@ def test_flat_panels_whose_seams_stop_closing_are_sewn_again_gently():
                   options=DrapeOptions(sew_vmax=0.05, far_retry_vmax=0.06, sew_budget=0.3))
 
 
-
 def test_a_stalled_flat_layout_is_sewn_again_within_half_a_second():
     """With a second pull to come, a flat layout's stall is judged over DrapeOptions.retry_stall
     windows: GarmentCode's T-shirt on its own body (its sleeve seams stall ~9 cm open at 3 m/s
@@ -168,6 +167,7 @@ def test_a_stalled_flat_layout_is_sewn_again_within_half_a_second():
     first = sum(1 for stage, m in said[:again[0]] if stage == "sewing" and m.startswith("largest open seam gap"))
     assert 0.45 <= first * 0.005 <= 0.6, first
     assert rep["seam_gap_mm"]["snapped"] == 0 and rep["settled"] and rep["strain"]["max"] <= 0.06
+
 
 def test_a_garment_that_slides_off_the_body_is_an_error_not_a_result(tmp_path):
     """An XXL skirt (waist 93 cm) on a thin body (default:female, weight 0: waist ~60 cm) slides
@@ -190,8 +190,8 @@ def test_a_garment_far_too_small_is_refused():
     """The sample scan's XS sleeveless shirt (chart bust 82 cm on a 97.5 cm bust): its side
     seams cannot close. Sewing gives up once they stopped closing, more than snap_gap open,
     from snap_after on (measured: after 2.0 s and, with the force pass's sums in another order,
-    2.4 s of simulated time; at the 4 s budget they were still 2.1-2.3 cm open): a clear error that says it may be too small, with a picture's
-    positions, marked too_small (for --size auto and the size hint). (Before the straps leaned
+    2.4 s of simulated time; at the 4 s budget they were still 2.1-2.3 cm open): a clear error
+    that says it may be too small, with a picture's positions, marked too_small (for --size auto and the size hint). (Before the straps leaned
     over the shoulders its seams closed and the drape refused it as stretched at least 16 %;
     the rule that does that is tested below.)"""
     from engine.body import resolve_body

@@ -149,14 +149,13 @@ def spring_runs(springs: np.ndarray, min_run: int = MIN_RUN) -> SpringRuns:
     lens = np.diff(np.r_[starts, len(order)])
     keep = lens >= min_run
     st, ln = starts[keep], lens[keep]
+    first = np.cumsum(ln) - ln  # each run's first position in the new order
+    pos = np.repeat(st - first, ln) + np.arange(ln.sum())  # the sorted positions of the runs' springs
     in_run = np.zeros(len(order), dtype=np.bool_)
-    pos = np.repeat(st, ln) + (np.arange(ln.sum()) - np.repeat(np.cumsum(ln) - ln, ln))
     in_run[pos] = True
-    perm = np.concatenate([order[pos], order[~in_run]])
-    first = np.cumsum(ln) - ln
-    runs = np.stack([first, s[order[st], 0], s[order[st], 1], ln], axis=1).astype(np.int64).reshape(-1, 4)
-    return SpringRuns(perm=perm.astype(np.int64), springs=np.ascontiguousarray(springs[perm]).astype(np.int32),
-                      runs=runs, n_run=int(ln.sum()))
+    perm = np.concatenate([order[pos], order[~in_run]]).astype(np.int64)
+    runs = np.stack([first, s[order[st], 0], s[order[st], 1], ln], axis=1).astype(np.int64)
+    return SpringRuns(perm=perm, springs=springs[perm].astype(np.int32), runs=runs, n_run=int(ln.sum()))
 
 
 @dataclass
