@@ -44,8 +44,8 @@ class PanelMesh:
 def farther_than(p, poly, r, out):
     """out[i] = whether point p[i] (P, 2) lies farther than r from the closed polyline poly
     (M, 2): each point's segments are tried until one comes within r (a point near the outline
-    stops early). Measured on the dress's panels at 1.5 cm (~3,000 points, ~400 segments): 6 ms
-    a panel instead of 55 ms for all distances with numpy."""
+    stops early). Measured on the dress's two panels at 1.5 cm (2,057 and 2,256 points, 200 and
+    210 segments): 2.3 and 3.9 ms instead of 45 and 53 ms for all distances with numpy."""
     m = poly.shape[0]
     for i in range(p.shape[0]):
         px, py = p[i, 0], p[i, 1]
