@@ -234,6 +234,10 @@ def walk_cmd(
                                       help="Super-elasticity rule while walking: average (eq. 5), directional "
                                       "(eq. 6; not yet stable) or zero."),
     collision: str = typer.Option("image", "--collision", help="image (depth/normal/velocity maps) or object (BVH)."),
+    stiffness: float = typer.Option(0.25, "--walk-stiffness",
+                                    help="Stretch and shear springs while walking, x the drape's (0.01-1): softer "
+                                    "springs take a longer eq. 4 step; a frame whose strain passes the fabric's "
+                                    "threshold + 10 % doubles them (up to 1) for the rest of the walk."),
     up: Optional[str] = typer.Option(None, "--up", help=UP_HELP),
     front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP),
 ):
@@ -250,7 +254,7 @@ def walk_cmd(
         from engine.scene.walk import WalkOptions, walk_cloth, walk_report, walking_body, write_walk_outputs
 
         wo = WalkOptions(seconds=seconds, fps=fps, reuse_maps=reuse_maps, velocity_mode=velocity_mode,
-                         collision=collision,
+                         collision=collision, stiffness=stiffness,
                          walk=WalkParams(speed=speed, stride=stride, in_place=in_place))
         wo.validate()  # refuse before dressing
         track = None

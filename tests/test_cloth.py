@@ -11,7 +11,7 @@ import pytest
 from engine.cloth import kernels as K
 from engine.cloth.fabrics import FABRICS, get_fabric
 from engine.cloth.model import (FLEXION, MASS_FLOOR, MASS_SCALE_PERCENTILE, SHEAR, STRUCTURAL, ClothParams, ClothState, build_model,
-                               lumped_mass, weld_model)
+                               lumped_mass, weld_model, with_stiffness)
 from engine.cloth.solver import GRAVITY, ClothSolver, FireRelaxer
 from engine.cloth.welds import merge_map, pull_seams
 from engine.errors import InputError
@@ -127,6 +127,49 @@ def test_softer_springs_allow_a_larger_step(garment):
     stiff = _model(garment)
     soft = _model(garment, params=replace(ClothParams(), stiffness_scale=ClothParams().stiffness_scale / 4))
     assert soft.dt_bound > stiff.dt_bound
+
+
+def test_with_stiffness_scales_stretch_and_shear_only(model):
+    soft = with_stiffness(model, 0.25)
+    bend = model.kind == FLEXION
+    np.testing.assert_array_equal(soft.stiffness[bend], model.stiffness[bend])
+    np.testing.assert_allclose(soft.stiffness[~bend], 0.25 * model.stiffness[~bend], rtol=1e-15)
+    assert np.array_equal(soft.springs, model.springs) and np.array_equal(soft.rest, model.rest)
+    np.testing.assert_allclose(soft.mass, model.mass, rtol=1e-12)  # the same cloth
+    assert soft.params.stiffness_scale == pytest.approx(0.25 * model.params.stiffness_scale)
+    # eq. 4: the stretch springs set the bound, so a quarter of the stiffness doubles the step
+    assert soft.dt_bound == pytest.approx(2.0 * model.dt_bound, rel=1e-3)
+    assert with_stiffness(model, 1.0) is model
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(InputError, match="stiffness factor"):
+            with_stiffness(model, bad)
+
+
+def test_restiffen_goes_on_as_a_solver_made_for_the_new_model(model, garment):
+    """Changing the springs mid-run (the walk's stiffening) continues exactly as a fresh solver
+    on the new model would from the same state; a model with other springs, or a step above
+    the new model's bound, is refused."""
+    x0 = garment.positions.copy()
+    x0[:, 1] += 0.01 * np.sin(7.0 * x0[:, 0])  # not flat: the springs work
+    soft = with_stiffness(model, 0.25)
+    a = ClothState(x0.copy(), np.zeros_like(x0))
+    sa = ClothSolver(soft, dt=soft.dt_bound)
+    for _ in range(20):
+        sa.step(a)
+    b = a.copy()
+    sa.restiffen(model, model.dt_bound)
+    sb = ClothSolver(model, dt=model.dt_bound)
+    for _ in range(30):
+        sa.step(a)
+        sb.step(b)
+    np.testing.assert_array_equal(a.x, b.x)
+    np.testing.assert_array_equal(a.v, b.v)
+    with pytest.raises(InputError, match="stability bound"):
+        sa.restiffen(model, 1.5 * model.dt_bound)
+    other = build_model(*[getattr(build_garment(square_spec(16.0), h=H), k)
+                          for k in ("uv", "panel", "lattice", "quads", "tris", "seams")], get_fabric("cotton"), H)
+    with pytest.raises(ValueError, match="same springs"):
+        sa.restiffen(other, other.dt_bound)
 
 
 def test_model_refuses_bad_stiffness_scale(garment):

@@ -227,6 +227,30 @@ def test_walking_skirt_stays_on_and_out_of_the_body(walked):
     assert abs(w.garment_frames[-1][:, 1].max() - top0) < 0.05
 
 
+def test_walk_springs_are_softer_and_stiffen_when_the_strain_limit_loses(walked):
+    """The walk runs at WalkOptions.stiffness x the drape's springs, at the eq. 4 step of those
+    (a quarter: twice the drape's step, in whole substeps a frame); a frame whose strain passes
+    the threshold + stiffen_at doubles the stiffness, up to the drape's, and says so."""
+    from engine.scene.walk import WalkOptions, walk_cloth
+
+    body, res, w, _ = walked
+    r = w.report
+    assert r["stiffness"] == {"start": 0.25, "end": 0.25, "stiffened": []}
+    frame_time = 1.0 / r["fps"]
+    assert r["substeps_per_frame"] in {int(np.ceil(frame_time / (2.0 * res.dt) * (1 + e))) for e in (-1e-3, 1e-3)}
+    assert r["dt_ms"] / 1000 <= 2.0 * res.dt * (1 + 1e-3)
+    threshold = res.model.fabric.strain_threshold
+    w2 = walk_cloth(body, res, WalkOptions(seconds=0.2, stiffen_at=0.001), texel=0.005,
+                    tol=res.model.params.tolerance)
+    st = w2.report["stiffness"]
+    assert [(s["frame"], s["stiffness"]) for s in st["stiffened"]] == [(1, 0.5), (2, 1.0)], st
+    assert all(s["strain"] > threshold + 0.001 for s in st["stiffened"]) and st["end"] == 1.0
+    # at the drape's stiffness, the drape's step again
+    assert w2.report["substeps_per_frame"] == int(np.ceil(frame_time / res.dt - 1e-9))
+    assert sum("softer walking springs" in line for line in w2.report["left_out"]) == 2
+    assert np.all(np.isfinite(w2.garment_frames))
+
+
 def test_walk_report_fields(walked):
     _, _, w, report = walked
     for key in ("cloth_vertices", "iterations", "penetration_mm", "strain", "settled", "frames", "fps",
@@ -261,6 +285,7 @@ def _walk_cli(tmp_path, *args):
     (["--body", "default:female", "--garment", "skirt", "--speed", "40"], "speed"),
     (["--body", "default:female", "--garment", "skirt", "--fps", "1000"], "--fps"),
     (["--body", "default:female", "--garment", "skirt", "--velocity-mode", "wobble"], "wobble"),
+    (["--body", "default:female", "--garment", "skirt", "--walk-stiffness", "0"], "walking stiffness"),
     (["--body", "{pillar}", "--garment", "skirt"], "arm"),
 ])
 def test_walk_cli_refuses_bad_input(tmp_path, monkeypatch, args, words):
@@ -410,6 +435,8 @@ def test_object_space_walk(walked):
 
 
 @pytest.mark.parametrize("field,value,words", [("contact_rounds", 0, "contact_rounds"),
+                                               ("stiffness", 0.0, "stiffness"), ("stiffness", 1.5, "stiffness"),
+                                               ("stiffen_at", 0.0, "stiffen_at"),
                                                ("collide_every", 17, "collide_every"),
                                                ("vm_passes", 0, "vm_passes"), ("strain_guard", -0.1, "strain_guard")])
 def test_walk_options_refuse_absurd_solver_settings(field, value, words):

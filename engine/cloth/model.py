@@ -23,7 +23,7 @@ for a step 1.03-1.28 x longer.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -308,6 +308,23 @@ def _assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, 
                       spring_c=c,
                       adj_ptr=ptr, adj_other=other, adj_spring=sid, quads=quads, tris=tris,
                       seams=seams, fabric=fabric, params=params, dt_bound=dt_bound, edge_length=h)
+
+
+def with_stiffness(model: ClothModel, factor: float) -> ClothModel:
+    """The model with its stretch and shear springs `factor` x as stiff (flexion unchanged: it is
+    the fabric's bending), the spring damping and the eq. 4 bound following (dt ~ 1 / sqrt(factor)
+    where stretch sets it). Masses, springs and rest lengths stay."""
+    if not (factor > 0 and np.isfinite(factor)):
+        raise InputError(f"stiffness factor must be positive, got {factor}")
+    if factor == 1.0:
+        return model
+    k = np.where(model.kind == FLEXION, model.stiffness, model.stiffness * factor)
+    params = replace(model.params, stiffness_scale=model.params.stiffness_scale * factor)
+    out = _assemble(model.mass, model.springs, model.rest, k, model.kind, model.quads, model.tris, model.seams,
+                    model.fabric, params, model.edge_length)
+    if "runs" in model.__dict__:  # the same springs: the force pass's order, made once (cached_property)
+        out.__dict__["runs"] = model.runs
+    return out
 
 
 def seam_flexion(uv: np.ndarray, springs: np.ndarray, kind: np.ndarray, rest: np.ndarray,

@@ -74,6 +74,7 @@ class ClothSolver:
                              f"({model.dt_bound * 1e3:.3f} ms for this fabric and mesh); use a smaller one "
                              "or force it (--force-dt)")
         self.model, self.collider, self.dt = model, collider, float(dt)
+        self.force_dt = force_dt
         self.gravity = np.asarray(gravity, dtype=np.float64)
         p = model.params
         self.mode = K.VM_MODES.get(p.velocity_mode)
@@ -85,8 +86,7 @@ class ClothSolver:
         self.f = np.zeros((n, 3))
         # the force pass's spring order and buffers (engine.cloth.model.SpringRuns)
         r = model.runs
-        limit = np.where(self.active, (1.0 + model.fabric.strain_threshold) * model.rest, np.inf)
-        self._sprops = np.ascontiguousarray(np.stack([model.rest, model.stiffness, model.spring_c, limit])[:, r.perm])
+        self._sprops = self._spring_props(model)
         self._soa = np.zeros((9, n))
         self._run_tmp = np.zeros((3, r.longest))
         self._lengths = np.zeros(len(model.springs))
@@ -113,6 +113,26 @@ class ClothSolver:
         self.recover = p.recover  # ... and the strain recovery (it would fight the seam pull)
         self.sewing = None  # (pairs, welded, tau, vmax) while sewing: see engine.cloth.welds
         self._q, self._q_age, self._q_version = None, 0, None  # the last map answer (see _contacts)
+
+    def _spring_props(self, model: ClothModel) -> np.ndarray:
+        """(4, S) rest, stiffness, damping, strain limit (inf: not limited) in the force pass's order."""
+        limit = np.where(self.active, (1.0 + model.fabric.strain_threshold) * model.rest, np.inf)
+        return np.ascontiguousarray(np.stack([model.rest, model.stiffness, model.spring_c, limit])[:, model.runs.perm])
+
+    def restiffen(self, model: ClothModel, dt: float) -> None:
+        """Go on with `model` -- the same cloth (springs, masses, rest lengths) with other spring
+        stiffness (engine.cloth.model.with_stiffness) -- at step dt, keeping the contacts, the
+        carried map answers and the counters."""
+        old = self.model
+        if model.springs.shape != old.springs.shape or not np.array_equal(model.springs, old.springs):
+            raise ValueError("restiffen: the model must have the same springs")
+        if dt > model.dt_bound * (1 + 1e-9) and not self.force_dt:
+            raise InputError(f"time step {dt * 1e3:.3f} ms exceeds the stability bound of eq. 4 "
+                             f"({model.dt_bound * 1e3:.3f} ms)")
+        if "runs" not in model.__dict__:  # same springs: the force pass's order (a cached_property)
+            model.__dict__["runs"] = old.runs
+        self.model, self.dt = model, float(dt)
+        self._sprops = self._spring_props(model)
 
     def step(self, state: ClothState, gravity_scale: float = 1.0, damping_scale: float = 1.0,
              friction_scale: float = 1.0) -> None:

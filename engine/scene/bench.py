@@ -305,7 +305,7 @@ def run_stability(body, quick: bool, say: Say) -> dict:
             for s in speeds:
                 cell = {"stiffness": k, "dt_fraction": f, "speed": s}
                 try:
-                    w = walk_cloth(body, drape, WalkOptions(seconds=0.3), texel=0.005,
+                    w = walk_cloth(body, drape, WalkOptions(seconds=0.3, stiffness=1.0), texel=0.005,
                                    tol=model.params.tolerance, track=tracks[s])
                     cell.update(outcome="stable", strain_max=w.report["strain_max"],
                                 penetration_max_mm=w.report["penetration_mm"]["max"])

@@ -10,6 +10,21 @@ v_dir = g dt + v_object (eq. 6 and §3.2's two rules) can be chosen, but is not 
 (WalkOptions.velocity_mode). Damping is the fabric's own
 (the drape's extra settling damping is off: walking is dynamic).
 
+Softer springs while walking (WalkOptions.stiffness, default 0.25 x the drape's stretch and shear
+springs): the eq. 4 step grows as 1 / sqrt of it (0.147 -> 0.295 ms on the dress), and the strain
+limit (velocity modification, the strain guard) holds the fit, as in seed 003 §4. Where it cannot
+-- a band the moving body wedges -- a frame whose strain max passes the fabric's threshold +
+WalkOptions.stiffen_at doubles the stiffness (up to the drape's) for the rest of the walk and the
+report says so. Measured on default:female, M, 4 s (max strain over all frames, the median of the
+frames' maxima, penetration max; realtime factors of one process each on this noisy machine):
+  dress     x1: 7.5 % / 6.6 %, 2.0 mm, 0.137 | x0.25: 12.9 % / 7.0 %, 1.2 mm, 0.201 | x0.0625: 35.2 % / 8.3 %
+  trousers  x1: 7.2 % / 7.0 %, 1.5 mm, 0.140 | x0.25: 21.8 % / 11.5 %, 4.2 mm, 0.181 | x0.0625: torn (52 %)
+  skirt     x1: 7.4 % / 5.8 %, 1.3 mm, 0.189 | x0.25: 11.9 % / 7.0 %, 1.1 mm, 0.335 | x0.0625: 24.1 % / 12.9 %
+  shirt     x1: 7.2 % / 6.5 %, 3.5 mm, 0.216 | x0.25: 13.5 % / 7.0 %, 1.4 mm, 0.275 | x0.0625: 33.3 % / 7.5 %
+The strain peaks are a few springs for a few frames (the dress's armholes as an arm swings back,
+the trousers' hips); with stiffening at threshold + 10 % the trousers went to x0.5 at frame 11
+(18.2 %) and then stayed at 7.3 % (median); the others never stiffened.
+
 Each frame is checked: non-finite positions, runaway strain or cloth far from the body end the run
 with SimulationError (never an exploded garment written as a result).
 """
@@ -24,7 +39,7 @@ import numpy as np
 
 from engine.body.motion import BodyTrack, WalkParams, walk_track
 from engine.body.types import SEGMENTS, Body
-from engine.cloth.model import ClothState
+from engine.cloth.model import ClothState, with_stiffness
 from engine.cloth.solver import ClothSolver
 from engine.errors import InputError, SimulationError
 from engine.scene.drape import DrapeResult, Progress
@@ -72,6 +87,14 @@ class WalkOptions:
     # into the body), as in the drape. Measured on the shirt, 4 s, 2 contact rounds: without it
     # strain max 11.9 %, penetration max 3.4 mm, 134 ms a frame; with 0.02: 7.1 %, 2.2 mm, 137 ms.
     strain_guard: float | None = 0.02
+    # The stretch and shear springs while walking, as a fraction of the drape's (the eq. 4 step
+    # grows as 1 / sqrt of it; the strain limit and the guard hold the fit). See module doc:
+    # 0.0625 tore the trousers and let the dress's armholes reach 35 %.
+    stiffness: float = 0.25
+    # A frame whose strain max passes the fabric's threshold + this doubles the springs' stiffness
+    # (at most the drape's) for the rest of the walk: the strain limit alone does not hold a band
+    # the body wedges (measured, see module doc). None: never.
+    stiffen_at: float | None = 0.10
     collision: str = "image"  # or "object": the BVH baseline (engine.collide.moving.TrackObjectCollider)
     friction: float = 1.0  # x the fabric's cloth-body friction (engine.scene.arms lowers arms without it)
 
@@ -88,6 +111,11 @@ class WalkOptions:
             raise InputError(f"contact_rounds {self.contact_rounds}: use 1 .. 16")
         if self.collide_every is not None and not (1 <= self.collide_every <= 16):
             raise InputError(f"collide_every {self.collide_every}: check collisions every 1 .. 16 steps")
+        if not (0.01 <= self.stiffness <= 1.0):
+            raise InputError(f"walking stiffness {self.stiffness} (--walk-stiffness): use 0.01 .. 1 "
+                             "(a fraction of the drape's springs)")
+        if self.stiffen_at is not None and not (0.0 < self.stiffen_at <= 0.4):
+            raise InputError(f"stiffen_at {self.stiffen_at}: use 0 .. 0.4 (strain past the fabric's threshold), or None")
         if not (0.0 <= self.friction <= 2.0):
             raise InputError(f"friction scale {self.friction}: use 0 .. 2")
         if not (5.0 <= self.fps <= 120.0):
@@ -191,17 +219,26 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
         else:
             left.append("nothing: the motion is not periodic, so maps are rendered for every frame")
         collider = TrackCollider(track, renderer, tol=tol, keep=track.periodic and o.reuse_maps)
-    model = drape.model
-    from dataclasses import replace
-
     frame_time = 1.0 / track.fps
-    sub = max(1, math.ceil(frame_time / drape.dt - 1e-9))
-    dt = frame_time / sub
-    every = o.collide_every if o.collide_every is not None else check_every(track, dt)
-    model = replace(model, params=replace(model.params, vm_passes=o.vm_passes, collide_every=every,
-                                         contact_rounds=o.contact_rounds, strain_guard=o.strain_guard))
-    if o.velocity_mode is not None:
-        model = replace(model, params=replace(model.params, velocity_mode=o.velocity_mode))
+
+    def walking_model(stiffness: float):
+        """The drape's model at `stiffness` x its springs with the walk's solver settings; the
+        step: the drape's (the eq. 4 bound, or what was chosen) scaled as the bound is."""
+        from dataclasses import replace
+
+        m = with_stiffness(drape.model, stiffness)
+        dt_max = drape.dt * m.dt_bound / drape.model.dt_bound
+        n_sub = max(1, math.ceil(frame_time / dt_max - 1e-9))
+        ev = o.collide_every if o.collide_every is not None else check_every(track, frame_time / n_sub)
+        m = replace(m, params=replace(m.params, vm_passes=o.vm_passes, collide_every=ev,
+                                      contact_rounds=o.contact_rounds, strain_guard=o.strain_guard,
+                                      velocity_mode=o.velocity_mode or m.params.velocity_mode))
+        return m, n_sub, frame_time / n_sub, ev
+
+    stiffness = o.stiffness
+    model, sub, dt, every = walking_model(stiffness)
+    stiffened = []
+    stiffen_strain = model.fabric.strain_threshold + o.stiffen_at if o.stiffen_at is not None else np.inf
     solver = ClothSolver(model, collider, dt=dt)
     state = ClothState(drape.state.x.copy(), drape.state.v.copy())
     frames = np.empty((n_frames + 1, model.n, 3), np.float32)
@@ -233,6 +270,13 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
                 raise SimulationError(f"the garment came apart at frame {i} ({i / track.fps:.2f} s: {what}); "
                                       "walk slower, or use a smaller size or a softer fabric")
             frames[i] = x
+            if strain > stiffen_strain and stiffness < 1.0:  # the strain limit is losing: stiffer springs
+                stiffness = min(1.0, 2.0 * stiffness)
+                model, sub, dt, every = walking_model(stiffness)
+                solver.restiffen(model, dt)
+                stiffened.append({"frame": i, "strain": strain, "stiffness": stiffness})
+                left.append(f"the softer walking springs from frame {i} on ({stiffness:g} x the drape's now), "
+                            f"because a spring reached {100 * strain:.1f} % strain")
             tp = time.perf_counter()
             bv = track.vertices(i)
             if exact is None:
@@ -259,6 +303,7 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
     report = {
         "frames": n_frames, "fps": track.fps, "seconds": sim_seconds, "substeps_per_frame": sub, "dt_ms": dt * 1000,
         "collision_every_steps": every,
+        "stiffness": {"start": o.stiffness, "end": stiffness, "stiffened": stiffened},
         "contact_rounds": o.contact_rounds,
         "strain_guard": o.strain_guard,
         "velocity_mode": model.params.velocity_mode,
