@@ -339,20 +339,42 @@ def test_query_point_callable_from_another_kernel(sphere_maps):
     from engine.collide.query import query_point_into
 
     @njit
-    def count_inside(points, tol, surf, vel, has_vel, kind, side_src, geom, layout):
+    def count_inside(points, tol, surf, vel, has_vel, kind, side_src, geom, layout, zz):
         n = points.shape[0]
         st, sp, pen = np.zeros(n, np.int8), np.zeros((n, 3)), np.zeros(n)
         nrm, vel_out, mi = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n, np.int32)
         inside = 0
         for p in range(n):
             if query_point_into(points[p, 0], points[p, 1], points[p, 2], tol, surf, vel, has_vel,
-                                kind, side_src, geom, layout, p, st, sp, pen, nrm, vel_out, mi) == 2:
+                                kind, side_src, geom, layout, zz, p, st, sp, pen, nrm, vel_out, mi) == 2:
                 inside += 1
         return inside
 
     maps = sphere_maps[1][0.005]
     pts = np.array([[0, 0, 0], [0, 0, 0.29], [0, 0, 0.31], [0.5, 0, 0]], np.float64)
     assert count_inside(pts, 0.005, *maps.kernel_args()) == 2
+
+
+@inner
+def test_depth_pairs_hold_the_front_and_back_depths(sphere_maps):
+    """The query's depth pairs: front and back z of each front-block pixel side by side, made
+    again after surf is rewritten in place (a walking frame's maps expanded into one buffer)."""
+    maps = sphere_maps[1][0.005]
+    for s in range(maps.count):
+        h, w, r0, cf, cb = maps.layout[s]
+        zz = maps.depth_pairs[r0:r0 + h, cf:cf + w]
+        np.testing.assert_array_equal(zz[..., 0], maps.front_depth(s))
+        np.testing.assert_array_equal(zz[..., 1], maps.back_depth(s))
+    h, w, r0, cf, cb = maps.layout[0]
+    before = maps.surf[r0, cf, 3]
+    try:
+        maps.surf[r0, cf, 3] = 123.0
+        assert maps.depth_pairs[r0, cf, 0] == before  # not told yet: the pairs are kept
+        maps.surf_changed()
+        assert maps.depth_pairs[r0, cf, 0] == 123.0
+    finally:
+        maps.surf[r0, cf, 3] = before
+        maps.surf_changed()
 
 
 @inner

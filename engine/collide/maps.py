@@ -38,6 +38,17 @@ from engine.collide.gl import GL, compile_program, ensure_context, read_pixels
 from engine.errors import InputError
 
 KIND_EMPTY, KIND_BODY, KIND_SIDE = 0, 1, 2
+
+
+@njit(cache=True)
+def _depth_pairs(surf, layout, zz):
+    """zz[r, c] = (front z, back z) for every front-block pixel (CollisionMaps.depth_pairs)."""
+    for m in range(layout.shape[0]):
+        h, w, r0, cf, cb = layout[m, 0], layout[m, 1], layout[m, 2], layout[m, 3], layout[m, 4]
+        for i in range(r0, r0 + h):
+            for j in range(w):
+                zz[i, cf + j, 0] = surf[i, cf + j, 3]
+                zz[i, cf + j, 1] = surf[i, cb + j, 3]
 SEGMENT_GROWTH_RINGS = 0  # rings a segment map reaches into its neighbours; 3 closed the armpit
 # crease (7.7 mm penetration) but let the arm maps push shoulder straps off while sewing: off
 
@@ -84,9 +95,30 @@ class CollisionMaps:
         return ["body" if s < 0 else SEGMENTS[s] for s in self.segment_ids]
 
     def kernel_args(self) -> tuple:
-        """The seven map arrays, in order, of query.query_point_into / query_batch."""
+        """The eight map arrays, in order, of query.query_point_into / query_batch."""
         return (self.surf, self.vel, self.has_velocity, self.kind, self.side_src,
-                self.geom, self.layout)
+                self.geom, self.layout, self.depth_pairs)
+
+    @property
+    def depth_pairs(self) -> np.ndarray:
+        """(Ha, Wa, 2) float32 at front-block positions: the front and the back depth (surf's z
+        of the front block and of the back block) side by side, made from `surf` when first
+        asked after surf changed. The query reads depths for every point it asks and the rest
+        of surf only for contacts: two depths in one cache line instead of two 16-byte texels
+        a block apart (the maps' cache footprint for the depth tests is an eighth)."""
+        zz = self.__dict__.get("_zz")
+        if zz is None or self.__dict__.get("_zz_of") is not self.surf:  # (surf_changed: rewritten in place)
+            if zz is None or zz.shape[:2] != self.surf.shape[:2]:
+                zz = np.zeros(self.surf.shape[:2] + (2,), np.float32)
+            _depth_pairs(self.surf, self.layout, zz)
+            self.__dict__["_zz"], self.__dict__["_zz_of"] = zz, self.surf
+        return zz
+
+    def surf_changed(self, buffer: np.ndarray | None = None) -> None:
+        """Say that surf was rewritten in place (or dropped): depth_pairs are made again when
+        next asked, into `buffer` when it has the shape, else into a new array (None also lets
+        go of the old one: a kept frame's maps keep no depth pairs)."""
+        self.__dict__["_zz"], self.__dict__["_zz_of"] = buffer, None
 
     # Views of one map (no copies); all (H, W[, C]) with row 0 at the bottom.
     def _block(self, a, s, back):

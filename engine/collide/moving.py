@@ -55,7 +55,7 @@ MIN_NZ = 0.2  # a carried penetration changes at most 1 / MIN_NZ x the normal mo
 
 @serial_kernel
 def _query_cached(local, t, frame, tol, widened, shift_t, root_v, vmax, reach, max_age, slack,
-                  surf, vel, has_vel, kind, side_src, geom, layout,
+                  surf, vel, has_vel, kind, side_src, geom, layout, zz,
                   c_local, c_time, c_frame, c_pen, c_un,
                   status, surface, penetration, normal, velocity, map_index):
     """Answer every point, asking the maps only where the last answer may be stale: the maps
@@ -89,7 +89,7 @@ def _query_cached(local, t, frame, tol, widened, shift_t, root_v, vmax, reach, m
         if fresh:
             continue
         asked += 1
-        st = query_point_into(x, y, z, tol + widened, surf, vel, has_vel, kind, side_src, geom, layout,
+        st = query_point_into(x, y, z, tol + widened, surf, vel, has_vel, kind, side_src, geom, layout, zz,
                               p, status, surface, penetration, normal, velocity, map_index)
         un = ((velocity[p, 0] - root_v[0]) * normal[p, 0] + (velocity[p, 1] - root_v[1]) * normal[p, 1]
               + (velocity[p, 2] - root_v[2]) * normal[p, 2])
@@ -194,6 +194,7 @@ class TrackCollider:
         self.stats = {"renders": 0, "reuses": 0, "map_seconds": 0.0, "map_bytes": 0, "asked": 0, "points": 0}
         self._normals_body = Body(track.body.vertices, track.body.faces)
         self._surf32 = self._vel32 = None  # the buffers a kept frame's maps are expanded into
+        self._zz32 = None  # the frame in use's depth pairs (CollisionMaps.depth_pairs)
 
     def _frame_maps(self, k: int) -> CollisionMaps:
         kept = self._kept.get(k)
@@ -205,7 +206,7 @@ class TrackCollider:
                 maps.surf = self._surf32 = _expanded(surf, self._surf32)
                 maps.vel = self._vel32 = _expanded(vel, self._vel32)
                 self.stats["map_seconds"] += time.perf_counter() - t0
-            return maps
+            return self._with_depth_pairs(maps)
         v = self.track.frames[k].astype(np.float64)
         self._normals_body.vertices = v
         maps = self.renderer.render(v, self._normals_body.vertex_normals(), self.track.vel[k].astype(np.float64))
@@ -216,6 +217,14 @@ class TrackCollider:
             self.stats["map_bytes"] += kept[1].nbytes + kept[2].nbytes + maps.kind.nbytes + maps.side_src.nbytes
             self._kept[k] = kept
         self.stats["map_seconds"] += time.perf_counter() - t0  # (the float16 copies included)
+        return self._with_depth_pairs(maps)
+
+    def _with_depth_pairs(self, maps: CollisionMaps) -> CollisionMaps:
+        """The frame's depth pairs go into one buffer for all frames (one frame's maps are in use;
+        kept frames keep none)."""
+        if self._zz32 is None or self._zz32.shape[:2] != maps.surf.shape[:2]:
+            self._zz32 = np.zeros(maps.surf.shape[:2] + (2,), np.float32)
+        maps.surf_changed(self._zz32)
         return maps
 
     def set_time(self, t: float) -> None:
@@ -224,8 +233,10 @@ class TrackCollider:
         i = int(round(max(t, 0.0) * tr.fps))
         k, _ = tr.index(i)
         if k != self._k:
-            if self.maps is not None and self.compact:
-                self.maps.surf = self.maps.vel = None  # the float16 copies are kept
+            if self.maps is not None:
+                self.maps.surf_changed()  # (the shared depth-pair buffer goes to the next frame)
+                if self.compact:
+                    self.maps.surf = self.maps.vel = None  # the float16 copies are kept
             self.maps = self._frame_maps(k)
             self._k = k
             self._root_v = tr.root_velocity(i)

@@ -26,9 +26,9 @@ the gap between an arm and the torso are clear, because each segment sees only i
 `query_point_into` is a plain @njit function so the cloth solver can call it inside its own
 kernels; it writes row p of the caller's output arrays (shapes as QueryResult) and returns the
 status -- writing into arrays instead of returning a 12-tuple keeps it at ~20-30 ns a point:
-    st = query_point_into(x, y, z, tol, surf, vel, has_vel, kind, side_src, geom, layout,
+    st = query_point_into(x, y, z, tol, surf, vel, has_vel, kind, side_src, geom, layout, zz,
                           p, status, surface, penetration, normal, velocity, map_index)
-(the seven map arrays are maps.kernel_args(), in that order).
+(the eight map arrays are maps.kernel_args(), in that order; zz: maps.depth_pairs).
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ CLEAR, BAND, INSIDE = 0, 1, 2
 
 
 @njit(cache=True, inline="always")
-def _sample(x, y, kind, surf, x0, y0, t, h, w, r0, cf, cb):
+def _sample(x, y, kind, zz, x0, y0, t, h, w, r0, cf):
     """Pixel lookup of one map at (x, y): (k, bil, ra, ca, fx, fy, zf, zb).
     k: -1 outside the window, else the pixel kind (0 empty, 1 body, 2 side); for a body pixel
     zf / zb are front / back depth, bilinear (bil) from the 4 centres around (x, y) whose
@@ -60,7 +60,6 @@ def _sample(x, y, kind, surf, x0, y0, t, h, w, r0, cf, cb):
     k = kind[r0 + i, cf + j]
     if k != 1:
         return k, False, r0 + i, cf + j, 0.0, 0.0, 0.0, 0.0
-    back = cb - cf
     j0 = int(math.floor(u - 0.5))
     i0 = int(math.floor(v - 0.5))
     ra = r0 + i0
@@ -70,18 +69,18 @@ def _sample(x, y, kind, surf, x0, y0, t, h, w, r0, cf, cb):
             and kind[ra + 1, ca] == 1 and kind[ra + 1, ca + 1] == 1):
         fx = u - 0.5 - j0
         fy = v - 0.5 - i0
-        zf = ((1.0 - fy) * ((1.0 - fx) * surf[ra, ca, 3] + fx * surf[ra, ca + 1, 3])
-              + fy * ((1.0 - fx) * surf[ra + 1, ca, 3] + fx * surf[ra + 1, ca + 1, 3]))
-        zb = ((1.0 - fy) * ((1.0 - fx) * surf[ra, ca + back, 3] + fx * surf[ra, ca + 1 + back, 3])
-              + fy * ((1.0 - fx) * surf[ra + 1, ca + back, 3] + fx * surf[ra + 1, ca + 1 + back, 3]))
+        zf = ((1.0 - fy) * ((1.0 - fx) * zz[ra, ca, 0] + fx * zz[ra, ca + 1, 0])
+              + fy * ((1.0 - fx) * zz[ra + 1, ca, 0] + fx * zz[ra + 1, ca + 1, 0]))
+        zb = ((1.0 - fy) * ((1.0 - fx) * zz[ra, ca, 1] + fx * zz[ra, ca + 1, 1])
+              + fy * ((1.0 - fx) * zz[ra + 1, ca, 1] + fx * zz[ra + 1, ca + 1, 1]))
         return 1, True, ra, ca, fx, fy, zf, zb
     ra = r0 + i
     ca = cf + j
-    return 1, False, ra, ca, 0.0, 0.0, float(surf[ra, ca, 3]), float(surf[ra, ca + back, 3])
+    return 1, False, ra, ca, 0.0, 0.0, float(zz[ra, ca, 0]), float(zz[ra, ca, 1])
 
 
 @njit(cache=True, inline="always")
-def _side_geometry(x, y, z, surf, side_src, ra, ca, x0, y0, t, r0, cf, cb):
+def _side_geometry(x, y, z, surf, zz, side_src, ra, ca, x0, y0, t, r0, cf):
     """Side-layer pixel (ra, ca): (pen_without_tol, nx, ny, edge, zf, zb, rs, cs) -- the rim
     line lies half a texel beyond the source body pixel c across the stored outward normal n;
     returns minus the distance to it (add tol for the penetration)."""
@@ -91,8 +90,8 @@ def _side_geometry(x, y, z, surf, side_src, ra, ca, x0, y0, t, r0, cf, cb):
     cs = src - rs * wa
     cx = x0 + (cs - cf + 0.5) * t
     cy = y0 + (rs - r0 + 0.5) * t
-    zf = float(surf[rs, cs, 3])
-    zb = float(surf[rs, cs + cb - cf, 3])
+    zf = float(zz[rs, cs, 0])
+    zb = float(zz[rs, cs, 1])
     nx = float(surf[ra, ca, 0])
     ny = float(surf[ra, ca, 1])
     edge = max((x - cx) * nx + (y - cy) * ny - 0.5 * t, 0.0)
@@ -101,7 +100,7 @@ def _side_geometry(x, y, z, surf, side_src, ra, ca, x0, y0, t, r0, cf, cb):
 
 
 @njit(cache=True, inline="always")
-def query_point_into(x, y, z, tol, surf, vel, has_vel, kind, side_src, geom, layout,
+def query_point_into(x, y, z, tol, surf, vel, has_vel, kind, side_src, geom, layout, zz,
                      p, status, surface, penetration, normal, velocity, map_index):
     """Answer one point (module doc for the rule) into row p of the output arrays; returns
     its status. The map is chosen by penetration (the largest); each map is sampled once and
@@ -111,14 +110,13 @@ def query_point_into(x, y, z, tol, surf, vel, has_vel, kind, side_src, geom, lay
     best_m = -1
     k, bil, ra, ca, fx, fy, zf, zb = 0, False, 0, 0, 0.0, 0.0, 0.0, 0.0
     for m in range(layout.shape[0]):
-        km, bm, ram, cam, fxm, fym, zfm, zbm = _sample(x, y, kind, surf, geom[m, 0], geom[m, 1], geom[m, 2],
-                                                       layout[m, 0], layout[m, 1], layout[m, 2], layout[m, 3],
-                                                       layout[m, 4])
+        km, bm, ram, cam, fxm, fym, zfm, zbm = _sample(x, y, kind, zz, geom[m, 0], geom[m, 1], geom[m, 2],
+                                                       layout[m, 0], layout[m, 1], layout[m, 2], layout[m, 3])
         if km <= 0:
             continue
         if km == 2:
-            pen = tol + _side_geometry(x, y, z, surf, side_src, ram, cam, geom[m, 0], geom[m, 1], geom[m, 2],
-                                       layout[m, 2], layout[m, 3], layout[m, 4])[0]
+            pen = tol + _side_geometry(x, y, z, surf, zz, side_src, ram, cam, geom[m, 0], geom[m, 1], geom[m, 2],
+                                       layout[m, 2], layout[m, 3])[0]
         elif z > 0.5 * (zfm + zbm):
             pen = zfm - z + tol
         else:
@@ -140,8 +138,8 @@ def query_point_into(x, y, z, tol, surf, vel, has_vel, kind, side_src, geom, lay
     x0, y0, t = geom[m, 0], geom[m, 1], geom[m, 2]
     r0, cf, cb = layout[m, 2], layout[m, 3], layout[m, 4]
     if k == 2:
-        d, nx, ny, edge, zf, zb, rs, cs = _side_geometry(x, y, z, surf, side_src, ra, ca,
-                                                         x0, y0, t, r0, cf, cb)
+        d, nx, ny, edge, zf, zb, rs, cs = _side_geometry(x, y, z, surf, zz, side_src, ra, ca,
+                                                         x0, y0, t, r0, cf)
         st = 1 if best_pen > 0.0 else 0
         surface[p, 0] = x - edge * nx
         surface[p, 1] = y - edge * ny
@@ -190,28 +188,28 @@ def query_point_into(x, y, z, tol, surf, vel, has_vel, kind, side_src, geom, lay
 
 
 @njit(cache=True, parallel=True)
-def query_batch(points, tol, surf, vel, has_vel, kind, side_src, geom, layout,
+def query_batch(points, tol, surf, vel, has_vel, kind, side_src, geom, layout, zz,
                 status, surface, penetration, normal, velocity, map_index):
     """query_point_into over points (N, 3) into preallocated outputs (shapes as QueryResult)."""
     for p in prange(points.shape[0]):
         query_point_into(points[p, 0], points[p, 1], points[p, 2], tol, surf, vel, has_vel,
-                         kind, side_src, geom, layout, p, status, surface, penetration, normal,
+                         kind, side_src, geom, layout, zz, p, status, surface, penetration, normal,
                          velocity, map_index)
 
 
 @serial_kernel(fastmath=False)
-def query_batch_serial(points, tol, surf, vel, has_vel, kind, side_src, geom, layout,
+def query_batch_serial(points, tol, surf, vel, has_vel, kind, side_src, geom, layout, zz,
                        status, surface, penetration, normal, velocity, map_index):
     """query_batch on one thread: the cloth solver's per-step query (a parallel region per step
     stalls whenever another process holds a core)."""
     for p in range(points.shape[0]):
         query_point_into(points[p, 0], points[p, 1], points[p, 2], tol, surf, vel, has_vel,
-                         kind, side_src, geom, layout, p, status, surface, penetration, normal,
+                         kind, side_src, geom, layout, zz, p, status, surface, penetration, normal,
                          velocity, map_index)
 
 
 @serial_kernel(fastmath=False)
-def query_rows_serial(points, rows, n_rows, tol, surf, vel, has_vel, kind, side_src, geom, layout,
+def query_rows_serial(points, rows, n_rows, tol, surf, vel, has_vel, kind, side_src, geom, layout, zz,
                       status, surface, penetration, normal, velocity, map_index):
     """query_batch_serial for the points listed in rows[:n_rows] only: the other rows of the
     outputs keep what they hold (the cloth solver asks again only for the points whose answer
@@ -219,7 +217,7 @@ def query_rows_serial(points, rows, n_rows, tol, surf, vel, has_vel, kind, side_
     for i in range(n_rows):
         p = rows[i]
         query_point_into(points[p, 0], points[p, 1], points[p, 2], tol, surf, vel, has_vel,
-                         kind, side_src, geom, layout, p, status, surface, penetration, normal,
+                         kind, side_src, geom, layout, zz, p, status, surface, penetration, normal,
                          velocity, map_index)
 
 
