@@ -63,6 +63,7 @@ class BodySections:
         self.ell = ell
         self._v, self._f = body.vertices, body.faces  # the whole body, for surface_z
         self._profiles: dict = {}
+        self._cuts: dict = {}  # row (1 cm) -> the body's cut there (both sides' profiles use it)
 
     def at(self, y: np.ndarray, grown: bool = False) -> np.ndarray:
         """(len(y), 4) ellipses at heights y (grown: (len(y), 5), + the growth factor of cover)."""
@@ -73,10 +74,15 @@ class BodySections:
         1 cm of each (x, y), from its cut at the nearest 1 cm; NaN where the body is not."""
         rows = np.round(np.asarray(y) / 0.01).astype(int)
         out = np.full(len(rows), np.nan)
+        todo = [r for r in np.unique(rows) if r not in self._cuts]
+        if todo:  # the new cuts at once (slice_stack sorts the faces to the cuts once; each cut
+            # alone cost 6.5 ms on the default body, 49 of them a third of the dress's placement)
+            for r, pieces in zip(todo, slice_stack(self._v, self._f, np.array(todo) * 0.01)):
+                self._cuts[r] = pieces
         for r in np.unique(rows):
             prof = self._profiles.get((r, side))
             if prof is None:
-                pieces = slice_stack(self._v, self._f, np.array([r * 0.01]))[0]
+                pieces = self._cuts[r]
                 prof = np.full(len(PROFILE_X), -np.inf)
                 if pieces:
                     p = np.concatenate([q.points for q in pieces])
