@@ -17,6 +17,7 @@ from engine.cloth import welds as W
 from engine.cloth.fabrics import get_fabric
 from engine.cloth.model import ClothState, build_model
 from engine.cloth.solver import ClothSolver
+from engine.collide import maps as M
 from engine.collide import query as Q
 from engine.collide.bvh import ObjectSpaceCollider
 from engine.garment.garment import build_garment
@@ -25,7 +26,7 @@ from engine.pattern.spec import PatternSpec
 
 def _serial_kernels():
     out = []
-    for mod in (K, W, Q):
+    for mod in (K, W, Q, M):
         for name in dir(mod):
             f = getattr(mod, name)
             if hasattr(f, "py_func") and f.targetoptions.get("parallel") and "prange" not in _src(f):
@@ -67,8 +68,13 @@ def test_serial_kernels_compile_without_parallel_loops():
     # the map query, on empty input with the map arrays' types
     Q.query_batch_serial(np.zeros((0, 3)), 0.005, np.zeros((2, 4, 4), np.float32), np.zeros((1, 1, 4), np.float32),
                          False, np.zeros((2, 4), np.int8), np.zeros((2, 4), np.int32), np.zeros((1, 3)),
-                         np.zeros((1, 5), np.int32), np.zeros(0, np.int8), np.zeros((0, 3)), np.zeros(0),
+                         np.zeros((1, 5), np.int32), np.zeros((2, 4, 2), np.float32), np.zeros(0, np.int8),
+                         np.zeros((0, 3)), np.zeros(0),
                          np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int32))
+    # the maps' pixel pass, on a 2 x 2 map pair
+    M._finish_maps(np.zeros((2, 4, 4), np.float32), np.zeros((1, 1, 4), np.float32), False,
+                   np.full((2, 4, 1), 0.5, np.float32), np.array([[2, 2, 0, 0, 2]], np.int32), 1,
+                   np.zeros((2, 4), np.int8), np.zeros((2, 4), np.int32))
     kernels = _serial_kernels()
     assert len(kernels) >= 10, [n for n, _ in kernels]
     checked = []
@@ -89,7 +95,7 @@ def test_serial_kernels_compile_without_parallel_loops():
             assert not diag.initial_parfors, f"{name} has a parallel loop (array expression / np.zeros?)"
         checked.append(name)
     for must in ("modify_velocities", "eval_forces_and_integrate", "collision_response", "query_batch_serial",
-                 "pull_seams", "inelastic_guard"):
+                 "pull_seams", "inelastic_guard", "_finish_maps"):
         assert any(n.endswith("." + must) for n in checked), (must, checked)
 
 
