@@ -66,10 +66,13 @@ def main() -> None:
                 print(f"{g:6s} h={h * 100:.2f} cm  {rep['cloth_vertices']:5d} v  maps {'reused' if reuse else 'every frame'}: "
                       f"{r['ms_per_frame']['total']:.0f} ms/frame, realtime {r['realtime_factor']:.3f}, "
                       f"pen max {r['penetration_mm']['max']:.1f} mm p99 {r['penetration_mm']['p99']:.1f} mm, "
-                      f"strain max {100 * r['strain_max']:.1f} %", flush=True)
+                      f"strain max {100 * r['strain_max']:.1f} %, springs x{r['stiffness']['start']:g}"
+                      + (f" -> x{r['stiffness']['end']:g}" if r["stiffness"]["stiffened"] else "")
+                      + f" of the drape's, step {r['dt_ms']:.3f} ms", flush=True)
     print()
     print(f"Walking {a.seconds:g} s at 30 fps, 1.2 m/s ({track.notes[0]}); default:female, size M, cotton; "
-          "ms per frame of the walking stage")
+          f"walking springs x{opts.stiffness:g} of the drape's (stiffer where a frame's strain passed the fabric's "
+          f"threshold + {opts.stiffen_at:g}); ms per frame of the walking stage")
     print("| product | vertices | maps | s/frame | frames/s | realtime | maps ms | cloth ms | collision ms | "
           "seed vertices | seed s/frame | seed frames/s |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
