@@ -22,9 +22,10 @@ warnings.filterwarnings("ignore", category=NumbaPerformanceWarning, message=r"(?
 
 
 def serial_kernel(fn=None, *, fastmath: bool = True, error_model: str = "python"):
-    """@serial_kernel or @serial_kernel(fastmath=False): njit(cache=True, parallel=True, ...).
+    """@serial_kernel or @serial_kernel(fastmath=False): njit(cache=True, parallel=True, nogil=True, ...)
+    (nogil: another Python thread -- the walk's map renderer -- runs while a kernel does).
     error_model="numpy": a division by zero gives inf/nan instead of raising, which lets LLVM
     vectorize a loop that divides (the check is a branch in every iteration)."""
     def wrap(f):
-        return njit(cache=True, fastmath=fastmath, parallel=True, error_model=error_model)(f)
+        return njit(cache=True, fastmath=fastmath, parallel=True, error_model=error_model, nogil=True)(f)
     return wrap(fn) if fn is not None else wrap

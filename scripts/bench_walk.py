@@ -72,7 +72,8 @@ def main() -> None:
     print()
     print(f"Walking {a.seconds:g} s at 30 fps, 1.2 m/s ({track.notes[0]}); default:female, size M, cotton; "
           f"walking springs x{opts.stiffness:g} of the drape's (stiffer where a frame's strain passed the fabric's "
-          f"threshold + {opts.stiffen_at:g}); ms per frame of the walking stage")
+          f"threshold + {opts.stiffen_at:g}); ms per frame of the walking stage (maps: the wait for maps "
+          "rendered one frame ahead in a helper thread, and the float16 expansions)")
     print("| product | vertices | maps | s/frame | frames/s | realtime | maps ms | cloth ms | collision ms | "
           "seed vertices | seed s/frame | seed frames/s |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")

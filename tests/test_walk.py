@@ -251,6 +251,25 @@ def test_walk_springs_are_softer_and_stiffen_when_the_strain_limit_loses(walked)
     assert np.all(np.isfinite(w2.garment_frames))
 
 
+def test_maps_rendered_ahead_give_the_same_walk(walked):
+    """Maps rendered one frame ahead in a helper thread (its own GL context) are the maps the
+    walk renders when the frame comes up: the same cloth bit for bit; the thread ends with the
+    walk and the main thread's GL context still renders."""
+    import threading
+
+    from engine.collide.maps import render_body_maps
+    from engine.scene.walk import WalkOptions, walk_cloth
+
+    body, res, _, _ = walked
+    runs = [walk_cloth(body, res, WalkOptions(seconds=0.3, reuse_maps=False, render_ahead=ahead), texel=0.005,
+                       tol=res.model.params.tolerance) for ahead in (False, True)]
+    assert np.array_equal(runs[0].garment_frames, runs[1].garment_frames)
+    assert runs[0].report["map_frames_rendered"] == runs[1].report["map_frames_rendered"] >= 9
+    assert not any(t.name.startswith("maps") for t in threading.enumerate())
+    maps = render_body_maps(body, texel=0.01)
+    assert (maps.kind == 1).any()
+
+
 def test_walk_report_fields(walked):
     _, _, w, report = walked
     for key in ("cloth_vertices", "iterations", "penetration_mm", "strain", "settled", "frames", "fps",

@@ -1,4 +1,5 @@
-"""One headless OpenGL context per process: EGL surfaceless first, OSMesa as the fallback.
+"""One headless OpenGL context per process (and one per helper thread that asks for its own):
+EGL surfaceless first, OSMesa as the fallback.
 
 PyOpenGL binds its function loader to a platform (PYOPENGL_PLATFORM) the first time
 `OpenGL.platform` is imported, and that cannot change afterwards. So this module decides the
@@ -13,7 +14,10 @@ else a ctypes probe of EGL's surfaceless platform (no PyOpenGL involved, so a fa
 still leaves OSMesa open), else OSMesa.
 
 The context is created lazily by `ensure_context()` and reused. It renders only into our own
-framebuffer objects (no window surface). Use it from one thread at a time.
+framebuffer objects (no window surface). Use it from one thread at a time. A helper thread that
+renders while another keeps that context (the walk's maps rendered ahead) makes its own with
+`thread_context()` and ends it with `drop_thread_context()`; GL objects stay with the context
+they were made in.
 """
 
 from __future__ import annotations
@@ -146,7 +150,11 @@ def _create_egl() -> dict:
     def make_current():
         return EGL.eglMakeCurrent(dpy, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, ctx)
 
-    return {"handle": ctx, "make_current": make_current, "keep": [dpy, cfg]}
+    def destroy():
+        EGL.eglMakeCurrent(dpy, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, EGL.EGL_NO_CONTEXT)
+        EGL.eglDestroyContext(dpy, ctx)
+
+    return {"handle": ctx, "make_current": make_current, "destroy": destroy, "keep": [dpy, cfg]}
 
 
 def _create_osmesa() -> dict:
@@ -173,7 +181,10 @@ def _create_osmesa() -> dict:
     def make_current():
         return osmesa.OSMesaMakeCurrent(ctx, buf, GL.GL_UNSIGNED_BYTE, 4, 4)
 
-    return {"handle": ctx, "make_current": make_current, "keep": [buf]}
+    def destroy():
+        osmesa.OSMesaDestroyContext(ctx)
+
+    return {"handle": ctx, "make_current": make_current, "destroy": destroy, "keep": [buf]}
 
 
 def ensure_context() -> ContextInfo:
@@ -202,6 +213,40 @@ def ensure_context() -> ContextInfo:
                            GL.glGetString(GL.GL_RENDERER).decode())
         _ctx.update(made, info=info, thread=threading.get_ident())
         return info
+
+
+_own = threading.local()  # a thread's private context (thread_context)
+
+
+def thread_context() -> ContextInfo:
+    """A context of the calling thread's own, made on its first call and current in it from then
+    on: for a helper thread that renders while the main thread keeps the process's context
+    (ensure_context) -- the walk's maps rendered a frame ahead (engine.collide.moving). GL
+    objects made in it are that thread's alone. drop_thread_context() ends it."""
+    if _DECISION_ERROR is not None:
+        raise _DECISION_ERROR
+    own = getattr(_own, "ctx", None)
+    if own is not None:
+        return own["info"]
+    with _lock:  # (one creation at a time: EGL and OSMesa set-up is not thread safe)
+        create = _create_egl if BACKEND == "egl" else _create_osmesa
+        try:
+            made = create()
+        except Exception as e:
+            raise GLUnavailableError(f"no second headless OpenGL context for a render thread ({BACKEND}: {e})") from e
+    made["info"] = ContextInfo(BACKEND, GL.glGetString(GL.GL_VERSION).decode(),
+                               GL.glGetString(GL.GL_RENDERER).decode())
+    _own.ctx = made
+    return made["info"]
+
+
+def drop_thread_context() -> None:
+    """Destroy the calling thread's private context (thread_context), if it has one."""
+    own = getattr(_own, "ctx", None)
+    if own is not None:
+        _own.ctx = None
+        with _lock:
+            own["destroy"]()
 
 
 def backend() -> str:

@@ -34,7 +34,7 @@ import numpy as np
 from numba import njit
 
 from engine.body.types import SEGMENT_ID, SEGMENTS, Body
-from engine.collide.gl import GL, compile_program, ensure_context, read_pixels
+from engine.collide.gl import GL, compile_program, ensure_context, read_pixels, thread_context
 from engine.errors import InputError
 from engine.jit import serial_kernel
 
@@ -211,7 +211,7 @@ class MapRenderer:
     def __init__(self, faces: np.ndarray, *, segments: np.ndarray | None = None,
                  segment_names: list[str] | None = None, texel: float = 0.005,
                  tol: float = 0.005, window: tuple[float, float] | None = None,
-                 with_velocity: bool = False):
+                 with_velocity: bool = False, own_context: bool = False):
         if not texel > 0 or not tol >= 0:
             raise InputError(f"texel ({texel}) must be > 0 and tol ({tol}) >= 0")
         if window is not None and not window[1] > window[0]:
@@ -253,7 +253,10 @@ class MapRenderer:
             off += f.size
         indices = np.concatenate([f.ravel() for f in subsets])
 
-        self.info = ensure_context()
+        # own_context: the calling thread's private context (gl.thread_context), for a renderer
+        # made and used in a helper thread only
+        self._context = thread_context if own_context else ensure_context
+        self.info = self._context()
         self._prog = compile_program(_VERTEX, _FRAGMENT)
         self._u_xy = GL.glGetUniformLocation(self._prog, "u_xy")
         self._u_z = GL.glGetUniformLocation(self._prog, "u_z")
@@ -350,7 +353,7 @@ class MapRenderer:
         vertices = np.asarray(vertices, np.float64)
         if vertices.shape[0] < self.n_vertices:
             raise InputError(f"{vertices.shape[0]} vertices, but faces index {self.n_vertices}")
-        ensure_context()
+        self._context()
         geom, lay, zr, keep, (ha, wa) = self._layout(vertices)
         self._ensure_fbo(ha, wa)
 
@@ -470,7 +473,7 @@ def _bbox(vertices, idx):
     return lo, hi
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _complete_one_sided(surf, vel, has_vel, depth, depth0, layout, geom):
     """Segment maps render each segment's own triangles, and each camera only the triangles
     turned toward it, so where the segments' open meshes meet (the shoulder: the deltoid's front

@@ -23,6 +23,10 @@ old -- a clear point beside a limb, outside every map, has no distance to test. 
 distance test alone for clear points asked 2214 instead of 3366 a check but let a swinging leg
 reach points unseen: penetration max 3.1 -> 13.5 mm.)
 
+Rendered ahead (`ahead`): a helper thread with its own GL context (engine.collide.gl.thread_context)
+renders frame k + 1's maps as soon as frame k's come into use; set_time waits for them only if
+they are late.
+
 Map reuse (DESIGN: a periodic walk renders one cycle): maps are kept per distinct track frame
 (the ramp, then one cycle), rendered on first use; `stats` counts renders and reuses. Kept maps
 hold their float arrays in float16 when `compact` is set (half the memory; the depth error at
@@ -39,11 +43,14 @@ from __future__ import annotations
 import math
 import time
 
+from concurrent.futures import Future, ThreadPoolExecutor
+
 import numpy as np
 
 from engine.body.motion import BodyTrack
 from engine.body.types import Body
 from engine.collide.collider import alloc_answers
+from engine.collide.gl import drop_thread_context
 from engine.collide.maps import CollisionMaps, MapRenderer
 from engine.collide.query import query_point_into
 from engine.jit import serial_kernel
@@ -176,10 +183,18 @@ class TrackCollider:
 
     solver_carries = False  # the body moves every step; it carries answers itself (_query_cached)
 
-    def __init__(self, track: BodyTrack, renderer: MapRenderer, tol: float, keep: bool = True,
-                 compact: bool = True):
-        """keep: keep each frame's maps for reuse (a periodic track); compact: keep them as float16."""
-        self.track, self.renderer, self.tol = track, renderer, float(tol)
+    def __init__(self, track: BodyTrack, renderer, tol: float, keep: bool = True,
+                 compact: bool = True, ahead: bool = False):
+        """keep: keep each frame's maps for reuse (a periodic track); compact: keep them as float16.
+        ahead: render each frame's maps one frame ahead in a helper thread while the solver works
+        (the body's motion does not depend on the cloth); `renderer` is then a function that makes
+        the MapRenderer, called in that thread (with own_context=True: GL objects belong to the
+        context they were made in). release() ends the thread."""
+        self.track, self.renderer, self.tol = track, (None if ahead else renderer), float(tol)
+        self._make_renderer = renderer if ahead else None
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="maps") if ahead else None
+        self._pending: dict[int, Future] = {}  # distinct frame -> its maps being rendered ahead
+        self.last_frame = math.inf  # frames past this one are not rendered ahead (the walk's end)
         self.keep, self.compact = keep, compact and keep
         self.version = 0
         self._kept: dict[int, tuple] = {}  # distinct frame -> maps (arrays maybe float16)
@@ -193,7 +208,8 @@ class TrackCollider:
         self._offset = np.zeros(3)
         self._offset_frame, self._offset_pair = None, None
         self._n = -1
-        self.stats = {"renders": 0, "reuses": 0, "map_seconds": 0.0, "map_bytes": 0, "asked": 0, "points": 0}
+        self.stats = {"renders": 0, "reuses": 0, "map_seconds": 0.0, "map_bytes": 0, "asked": 0, "points": 0,
+                      "render_seconds": 0.0}
         self._normals_body = Body(track.body.vertices, track.body.faces)
         self._surf32 = self._vel32 = None  # the buffers a kept frame's maps are expanded into
         self._zz32 = None  # the frame in use's depth pairs (CollisionMaps.depth_pairs)
@@ -209,17 +225,39 @@ class TrackCollider:
                 maps.vel = self._vel32 = _expanded(vel, self._vel32)
                 self.stats["map_seconds"] += time.perf_counter() - t0
             return self._with_depth_pairs(maps)
+        if self._pool is not None:  # rendered ahead (or now, in the helper thread)
+            fut = self._pending.pop(k, None) or self._pool.submit(self._render, k)
+            maps, kept, took = fut.result()
+        else:
+            maps, kept, took = self._render(k)
+        self.stats["renders"] += 1
+        self.stats["render_seconds"] += took
+        if kept is not None:
+            self.stats["map_bytes"] += kept[1].nbytes + kept[2].nbytes + maps.kind.nbytes + maps.side_src.nbytes
+            self._kept[k] = kept
+        # (the float16 copies included; rendered ahead: only the wait for them)
+        self.stats["map_seconds"] += time.perf_counter() - t0
+        return self._with_depth_pairs(maps)
+
+    def _render(self, k: int):
+        """Frame k's maps (and their kept copy): (maps, kept or None, seconds it took)."""
+        t0 = time.perf_counter()
+        if self.renderer is None:
+            self.renderer = self._make_renderer()
         v = self.track.frames[k].astype(np.float64)
         self._normals_body.vertices = v
         maps = self.renderer.render(v, self._normals_body.vertex_normals(), self.track.vel[k].astype(np.float64))
-        self.stats["renders"] += 1
+        kept = None
         if self.keep:
             kept = (maps, _compacted(maps.surf), _compacted(maps.vel)) if self.compact else \
                 (maps, maps.surf, maps.vel)
-            self.stats["map_bytes"] += kept[1].nbytes + kept[2].nbytes + maps.kind.nbytes + maps.side_src.nbytes
-            self._kept[k] = kept
-        self.stats["map_seconds"] += time.perf_counter() - t0  # (the float16 copies included)
-        return self._with_depth_pairs(maps)
+        return maps, kept, time.perf_counter() - t0
+
+    def _render_ahead(self, i: int) -> None:
+        """Start rendering the maps of frame i (if neither kept nor on their way)."""
+        k, _ = self.track.index(i)
+        if k != self._k and k not in self._kept and k not in self._pending and i <= self.last_frame:
+            self._pending[k] = self._pool.submit(self._render, k)
 
     def _with_depth_pairs(self, maps: CollisionMaps) -> CollisionMaps:
         """The frame's depth pairs go into one buffer for all frames (one frame's maps are in use;
@@ -241,6 +279,8 @@ class TrackCollider:
                     self.maps.surf = self.maps.vel = None  # the float16 copies are kept
             self.maps = self._frame_maps(k)
             self._k = k
+            if self._pool is not None:
+                self._render_ahead(i + 1)
             self._root_v = tr.root_velocity(i)
             rel = tr.vel[k].astype(np.float64) - self._root_v
             self._vmax = float(np.sqrt(np.einsum("ij,ij->i", rel, rel).max()))
@@ -284,8 +324,22 @@ class TrackCollider:
         return self.status, self.normal, self.velocity, self.depth
 
     def release(self) -> None:
+        """Let go of the kept maps; with ahead, end the helper thread (its renderer and context)."""
+        if self._pool is not None:
+            for fut in self._pending.values():
+                fut.cancel()
+            self._pending.clear()
+            self._pool.submit(self._end_thread).result()
+            self._pool.shutdown(wait=True)
+            self._pool = None
         self._kept.clear()
         self.maps = None
+
+    def _end_thread(self) -> None:
+        if self.renderer is not None:
+            self.renderer.release()
+            self.renderer = None
+        drop_thread_context()
 
 
 @serial_kernel

@@ -25,6 +25,12 @@ The strain peaks are a few springs for a few frames (the dress's armholes as an 
 the trousers' hips); with stiffening at threshold + 10 % the trousers went to x0.5 at frame 11
 (18.2 %) and then stayed at 7.3 % (median); the others never stiffened.
 
+The maps of each frame are rendered one frame ahead in a helper thread with its own GL context
+(WalkOptions.render_ahead; engine.collide.moving): the body's motion does not depend on the
+cloth, and the numba kernels release the GIL, so the render runs on the second core while the
+solver works; the solver waits only when a render is late (`ms_per_frame.maps` counts that wait,
+`walk.map_render_seconds` the renders). The maps are the same bit for bit (tests/test_walk.py).
+
 Each frame is checked: non-finite positions, runaway strain or cloth far from the body end the run
 with SimulationError (never an exploded garment written as a result).
 """
@@ -98,6 +104,10 @@ class WalkOptions:
     # (at most the drape's) for the rest of the walk: the strain limit alone does not hold a band
     # the body wedges (measured, see module doc). None: never.
     stiffen_at: float | None = 0.10
+    # Render each frame's maps one frame ahead in a helper thread while the solver works on this
+    # frame (the body's motion does not depend on the cloth); the solver waits only when they
+    # are late. False: render when the frame comes up, in this thread.
+    render_ahead: bool = True
     collision: str = "image"  # or "object": the BVH baseline (engine.collide.moving.TrackObjectCollider)
     friction: float = 1.0  # x the fabric's cloth-body friction (engine.scene.arms lowers arms without it)
 
@@ -212,8 +222,12 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
         segs, seg_left = walk_segments(body, track, top)
         left += seg_left
         window = (0.0, min(float(track.frames[:, :, 1].max()), top + 0.15))
-        renderer = MapRenderer(body.faces, segments=body.segments, segment_names=segs, texel=texel, tol=tol,
-                               window=window, with_velocity=True)
+        def make_renderer(own_context: bool = False) -> MapRenderer:
+            return MapRenderer(body.faces, segments=body.segments, segment_names=segs, texel=texel, tol=tol,
+                               window=window, with_velocity=True, own_context=own_context)
+
+        # rendered ahead: the helper thread makes the renderer; else it is made here
+        renderer = None if o.render_ahead else make_renderer()
         if track.periodic and o.reuse_maps:
             distinct = min(n_frames + 1, len(track.frames))
             left.append(f"maps of frames after the first cycle, because the walk is periodic: {distinct} frames "
@@ -221,7 +235,12 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
                         f"reused for all {n_frames + 1} frames (float16 copies)")
         else:
             left.append("nothing: the motion is not periodic, so maps are rendered for every frame")
-        collider = TrackCollider(track, renderer, tol=tol, keep=track.periodic and o.reuse_maps)
+        if o.render_ahead:
+            collider = TrackCollider(track, lambda: make_renderer(own_context=True), tol=tol,
+                                     keep=track.periodic and o.reuse_maps, ahead=True)
+            collider.last_frame = n_frames
+        else:
+            collider = TrackCollider(track, renderer, tol=tol, keep=track.periodic and o.reuse_maps)
     frame_time = 1.0 / track.fps
 
     def walking_model(stiffness: float):
@@ -299,6 +318,8 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
     finally:
         if renderer is not None:
             renderer.release()
+        elif o.collision == "image":
+            collider.release()  # (the helper thread's renderer and context)
     wall_walk = time.perf_counter() - t_walk0 - t_pen
     sim_seconds = n_frames * frame_time
     pooled = np.concatenate(depths)  # every cloth vertex of every frame
@@ -314,6 +335,10 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
         "ms_per_frame": {"maps": 1000 * t_maps / n_frames, "cloth": 1000 * t_cloth / n_frames,
                          "collision": 1000 * t_coll / n_frames, "total": 1000 * wall_walk / n_frames},
         "map_frames_rendered": collider.stats["renders"], "map_frames_reused": collider.stats["reuses"],
+        # the renders' own time (ms_per_frame.maps counts what the walk waited for: rendered ahead,
+        # in a helper thread, only their lateness)
+        "map_render_seconds": collider.stats.get("render_seconds", collider.stats["map_seconds"]),
+        "maps_rendered_ahead": o.render_ahead and o.collision == "image",
         "map_memory_mb": collider.stats["map_bytes"] / 2 ** 20,
         "penetration_mm": {"max": pmax, "p99": p99},  # over all vertices of all frames
         "strain_max": max(f["strain_max"] for f in per_frame),
