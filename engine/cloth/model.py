@@ -320,11 +320,8 @@ def with_stiffness(model: ClothModel, factor: float) -> ClothModel:
         return model
     k = np.where(model.kind == FLEXION, model.stiffness, model.stiffness * factor)
     params = replace(model.params, stiffness_scale=model.params.stiffness_scale * factor)
-    out = _assemble(model.mass, model.springs, model.rest, k, model.kind, model.quads, model.tris, model.seams,
-                    model.fabric, params, model.edge_length)
-    if "runs" in model.__dict__:  # the same springs: the force pass's order, made once (cached_property)
-        out.__dict__["runs"] = model.runs
-    return out
+    return _assemble(model.mass, model.springs, model.rest, k, model.kind, model.quads, model.tris, model.seams,
+                     model.fabric, params, model.edge_length)
 
 
 def seam_flexion(uv: np.ndarray, springs: np.ndarray, kind: np.ndarray, rest: np.ndarray,

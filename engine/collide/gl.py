@@ -187,6 +187,11 @@ def _create_osmesa() -> dict:
     return {"handle": ctx, "make_current": make_current, "destroy": destroy, "keep": [buf]}
 
 
+def _current_info() -> ContextInfo:
+    """What the context current in this thread is."""
+    return ContextInfo(BACKEND, GL.glGetString(GL.GL_VERSION).decode(), GL.glGetString(GL.GL_RENDERER).decode())
+
+
 def ensure_context() -> ContextInfo:
     """Create the process's GL context on first use (later calls reuse it) and make it current
     in the calling thread. Raises GLUnavailableError naming what was tried."""
@@ -209,8 +214,7 @@ def ensure_context() -> ContextInfo:
             raise GLUnavailableError(
                 f"no headless OpenGL context (tried {tried}). Try TRYON_GL={other} in a fresh "
                 f"process, or {_APT_HINT}") from e
-        info = ContextInfo(BACKEND, GL.glGetString(GL.GL_VERSION).decode(),
-                           GL.glGetString(GL.GL_RENDERER).decode())
+        info = _current_info()
         _ctx.update(made, info=info, thread=threading.get_ident())
         return info
 
@@ -234,8 +238,7 @@ def thread_context() -> ContextInfo:
             made = create()
         except Exception as e:
             raise GLUnavailableError(f"no second headless OpenGL context for a render thread ({BACKEND}: {e})") from e
-    made["info"] = ContextInfo(BACKEND, GL.glGetString(GL.GL_VERSION).decode(),
-                               GL.glGetString(GL.GL_RENDERER).decode())
+    made["info"] = _current_info()
     _own.ctx = made
     return made["info"]
 

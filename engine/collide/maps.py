@@ -39,6 +39,8 @@ from engine.errors import InputError
 from engine.jit import serial_kernel
 
 KIND_EMPTY, KIND_BODY, KIND_SIDE = 0, 1, 2
+SEGMENT_GROWTH_RINGS = 0  # rings a segment map reaches into its neighbours; 3 closed the armpit
+# crease (7.7 mm penetration) but let the arm maps push shoulder straps off while sewing: off
 
 
 @njit(cache=True)
@@ -50,8 +52,6 @@ def _depth_pairs(surf, layout, zz):
             for j in range(w):
                 zz[i, cf + j, 0] = surf[i, cf + j, 3]
                 zz[i, cf + j, 1] = surf[i, cb + j, 3]
-SEGMENT_GROWTH_RINGS = 0  # rings a segment map reaches into its neighbours; 3 closed the armpit
-# crease (7.7 mm penetration) but let the arm maps push shoulder straps off while sewing: off
 
 
 @dataclass

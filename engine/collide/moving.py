@@ -206,7 +206,6 @@ class TrackCollider:
         self._t = 0.0
         self._shift_t = 0.0
         self._offset = np.zeros(3)
-        self._offset_frame, self._offset_pair = None, None
         self._n = -1
         self.stats = {"renders": 0, "reuses": 0, "map_seconds": 0.0, "map_bytes": 0, "asked": 0, "points": 0,
                       "render_seconds": 0.0}
@@ -287,15 +286,7 @@ class TrackCollider:
             self._k_serial += 1  # answers from other maps are not carried over
         self._shift_t = t - i / tr.fps
         self._t = t
-        # the root offset at t, as tr.offset_at(t), with the two frames' offsets kept while t
-        # stays between them (a third of set_time's ~10 us a step went to looking them up)
-        f = max(t, 0.0) * tr.fps
-        i0 = int(math.floor(f))
-        if i0 != self._offset_frame:
-            self._offset_pair = (tr.offset(i0), tr.offset(i0 + 1))
-            self._offset_frame = i0
-        a = f - i0
-        self._offset = (1.0 - a) * self._offset_pair[0] + a * self._offset_pair[1]
+        self._offset = tr.offset_at(t)
         self.version += 1  # every step: the body moves
 
     def _alloc(self, n: int) -> None:
