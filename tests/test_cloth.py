@@ -893,6 +893,47 @@ def test_strain_guard_never_pulls_a_contact_into_the_body():
     assert x[0, 1] < 0.0
 
 
+def test_guard_positions_is_the_plain_guard_bit_for_bit(garment):
+    """K.guard_positions (a vector pass over the force pass's runs, then only the flagged
+    springs and the springs next to what moved) gives exactly what provot_positions with
+    keep_out followed by inelastic_guard gives: positions, velocities, the count and the list
+    of long springs -- on a cloth stretched unevenly (many long springs next to each other, so
+    projections make their neighbours long), some points touching a body -- and leaves its flag
+    and point buffers clear for the next step."""
+    m = _model(garment)
+    rng = np.random.default_rng(7)
+    x0 = garment.positions * np.array([1.09, 1.0, 1.02]) + rng.normal(0.0, 0.0008, garment.positions.shape)
+    v0 = rng.normal(0.0, 0.3, x0.shape)
+    contact = rng.random(m.n) < 0.2
+    normal = np.zeros((m.n, 3))
+    normal[:, 1] = 1.0
+    thr = m.fabric.strain_threshold + 0.02
+    x1, v1, w1 = x0.copy(), v0.copy(), np.zeros(len(m.springs), np.int32)
+    active = m.kind != FLEXION
+    n1 = K.provot_positions(x1, m.springs, m.rest, active, thr, m.inv_mass, 6, w1, True, contact, normal, 0.0003)
+    assert n1 > 50
+    K.inelastic_guard(x1, x0, v1)
+    solver = ClothSolver(m)
+    x2, v2, r = x0.copy(), v0.copy(), m.runs
+    n2 = K.guard_positions(x2, v2, m.springs, m.rest, active, thr, m.inv_mass, 6, solver.vm_work, contact, normal,
+                           0.0003, r.perm, r.runs, r.springs, r.n_run, solver._guard_limits(thr), solver._soa,
+                           solver._listed, solver._listed_words, m.adj_ptr, m.adj_spring, solver.x_guard,
+                           solver._saved, solver._saved_list)
+    assert n2 == n1
+    np.testing.assert_array_equal(solver.vm_work[:n2], w1[:n1])
+    np.testing.assert_array_equal(x2, x1)
+    np.testing.assert_array_equal(v2, v1)
+    assert not solver._listed.any() and not solver._saved.any()
+    # nothing long: nothing moves
+    x3, v3 = garment.positions.copy(), v0.copy()
+    assert K.guard_positions(x3, v3, m.springs, m.rest, active, thr, m.inv_mass, 6, solver.vm_work, contact, normal,
+                             0.0003, r.perm, r.runs, r.springs, r.n_run, solver._guard_limits(thr), solver._soa,
+                             solver._listed, solver._listed_words, m.adj_ptr, m.adj_spring, solver.x_guard,
+                             solver._saved, solver._saved_list) == 0
+    np.testing.assert_array_equal(x3, garment.positions)
+    np.testing.assert_array_equal(v3, v0)
+
+
 def test_strain_guard_shortens_a_spring_a_little_at_a_time():
     """The guard moves positions by at most max_move a spring a pass, so a spring stretched 3 mm
     past its limit (cloth torn over a body part) is brought back over several steps, not in one

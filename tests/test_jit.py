@@ -59,6 +59,11 @@ def test_serial_kernels_compile_without_parallel_loops():
     K.provot_positions(state.x, m.springs, m.rest, solver.active, 0.05, m.inv_mass, 2, solver.vm_work, False,
                        solver.contact, solver.contact_n)
     K.inelastic_guard(state.x, solver.x_guard, state.v)
+    r = m.runs
+    K.guard_positions(state.x, state.v, m.springs, m.rest, solver.active, 0.05, m.inv_mass, 2, solver.vm_work,
+                      solver.contact, solver.contact_n, 0.001, r.perm, r.runs, r.springs, r.n_run,
+                      solver._guard_limits(0.05), solver._soa, solver._listed, solver._listed_words, m.adj_ptr,
+                      m.adj_spring, solver.x_guard, solver._saved, solver._saved_list)
     # the response on its own (the solver's contact_rounds does the same work; tests/test_cloth.py
     # compares them), on the last step's points
     npt = len(solver.points)
@@ -95,7 +100,7 @@ def test_serial_kernels_compile_without_parallel_loops():
             assert not diag.initial_parfors, f"{name} has a parallel loop (array expression / np.zeros?)"
         checked.append(name)
     for must in ("modify_velocities", "eval_forces_and_integrate", "collision_response", "query_batch_serial",
-                 "pull_seams", "inelastic_guard", "_finish_maps"):
+                 "pull_seams", "inelastic_guard", "guard_positions", "_finish_maps"):
         assert any(n.endswith("." + must) for n in checked), (must, checked)
 
 

@@ -464,6 +464,118 @@ def provot_positions(x, springs, rest, active, threshold, inv_mass, passes, work
 
 
 @serial_kernel
+def guard_positions(x, v, springs, rest, active, threshold, inv_mass, passes, work, contact, contact_n, max_move,
+                    perm, runs, run_springs, n_run, lim2, soa, flags, flag_words, adj_ptr, adj_spring,
+                    x_before, saved, saved_list):
+    """The strain guard: provot_positions(..., keep_out=True, max_move) followed by
+    inelastic_guard, giving the same positions and velocities bit for bit, without going
+    through every spring one by one.
+    A vector pass over the force pass's runs (engine.cloth.model.SpringRuns: perm, runs,
+    run_springs, n_run; positions copied into soa rows 0-2) flags the springs whose squared
+    length passes lim2 (run order: a hair below ((1 + threshold) rest)^2, inf for springs the
+    strain limit leaves alone) -- a superset of those provot_positions' sweep finds long before
+    it moves anything. The sweep then goes, in the model's order, through the flagged springs
+    only: a spring not flagged is not long, and stays so until one of its ends moves, so a
+    projection flags the later springs at both of its ends (adj_ptr, adj_spring: the model's
+    CSR adjacency). The points it moves have their positions saved first (x_before, saved,
+    saved_list), and the inelastic guard runs over those points only.
+    flags: uint8, length a multiple of 8, zero on entry and on return (flag_words: the same
+    memory as uint64); saved: uint8 (N,), zero on entry and on return.
+    Returns the number of springs found over the limit (as provot_positions)."""
+    n = x.shape[0]
+    xs, ys, zs = soa[0], soa[1], soa[2]
+    for i in range(n):
+        xs[i] = x[i, 0]
+        ys[i] = x[i, 1]
+        zs[i] = x[i, 2]
+    any_long = False
+    for r in range(runs.shape[0]):
+        s0, a0, b0, m = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3]
+        xa, ya, za = xs[a0:a0 + m], ys[a0:a0 + m], zs[a0:a0 + m]
+        xb, yb, zb = xs[b0:b0 + m], ys[b0:b0 + m], zs[b0:b0 + m]
+        g = lim2[s0:s0 + m]
+        over = 0
+        for t in range(m):
+            dx = xb[t] - xa[t]
+            dy = yb[t] - ya[t]
+            dz = zb[t] - za[t]
+            over += dx * dx + dy * dy + dz * dz > g[t]
+        if over:
+            any_long = True
+            for t in range(m):
+                dx = xb[t] - xa[t]
+                dy = yb[t] - ya[t]
+                dz = zb[t] - za[t]
+                if dx * dx + dy * dy + dz * dz > g[t]:
+                    flags[perm[s0 + t]] = 1
+    for s in range(n_run, run_springs.shape[0]):
+        a = run_springs[s, 0]
+        b = run_springs[s, 1]
+        dx = xs[b] - xs[a]
+        dy = ys[b] - ys[a]
+        dz = zs[b] - zs[a]
+        if dx * dx + dy * dy + dz * dz > lim2[s]:
+            flags[perm[s]] = 1
+            any_long = True
+    if not any_long:
+        return 0
+    n_act = 0
+    n_saved = 0
+    n_springs = springs.shape[0]
+    for w in range(flag_words.shape[0]):
+        if flag_words[w] == 0:
+            continue
+        for s in range(8 * w, min(8 * w + 8, n_springs)):
+            if not flags[s]:
+                continue
+            flags[s] = 0
+            if not active[s]:
+                continue
+            a = springs[s, 0]
+            b = springs[s, 1]
+            for e in (a, b):
+                if not saved[e]:
+                    saved[e] = 1
+                    saved_list[n_saved] = e
+                    n_saved += 1
+                    for c in range(3):
+                        x_before[e, c] = x[e, c]
+            if _project_one(x, a, b, (1.0 + threshold) * rest[s], inv_mass, True, contact, contact_n, max_move):
+                work[n_act] = s
+                n_act += 1
+                for e in (a, b):
+                    for k in range(adj_ptr[e], adj_ptr[e + 1]):
+                        j = adj_spring[k]
+                        if j > s:
+                            flags[j] = 1
+    for _ in range(passes - 1):
+        changed = 0
+        for k in range(n_act):
+            s = work[k]
+            if _project_one(x, springs[s, 0], springs[s, 1], (1.0 + threshold) * rest[s], inv_mass,
+                            True, contact, contact_n, max_move):
+                changed += 1
+        if changed == 0:
+            break
+    for k in range(n_saved):
+        i = saved_list[k]
+        saved[i] = 0
+        if n_act:
+            dx = x[i, 0] - x_before[i, 0]
+            dy = x[i, 1] - x_before[i, 1]
+            dz = x[i, 2] - x_before[i, 2]
+            dd = dx * dx + dy * dy + dz * dz
+            if dd > 0.0:
+                vd = v[i, 0] * dx + v[i, 1] * dy + v[i, 2] * dz
+                if vd < 0.0:
+                    c = vd / dd
+                    v[i, 0] -= c * dx
+                    v[i, 1] -= c * dy
+                    v[i, 2] -= c * dz
+    return n_act
+
+
+@serial_kernel
 def inelastic_guard(x, x_before, v):
     """After the strain guard moved positions (x_before -> x): each moved vertex loses the part
     of its velocity that points back against its move (v <- v - min(0, v.d) d / |d|^2, d its

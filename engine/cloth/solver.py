@@ -109,7 +109,10 @@ class ClothSolver:
         self.last_hits = 0
         self.strain_guard = p.strain_guard  # the drape turns it off while sewing
         self.guarded = 0  # springs the strain guard shortened in the last step
-        self.x_guard = np.zeros((n, 3))  # positions before the guard moved them (K.inelastic_guard)
+        self.x_guard = np.zeros((n, 3))  # positions before the guard moved them (K.guard_positions)
+        self._saved = np.zeros(n, dtype=np.uint8)  # ... which points those are
+        self._saved_list = np.zeros(n, dtype=np.int32)
+        self._guard_lim2 = (None, None)  # (threshold, squared lengths the guard looks past, run order)
         self.recover = p.recover  # ... and the strain recovery (it would fight the seam pull)
         self.sewing = None  # (pairs, welded, tau, vmax) while sewing: see engine.cloth.welds
         self._q, self._q_age, self._q_version = None, 0, None  # the last map answer (see _contacts)
@@ -118,6 +121,17 @@ class ClothSolver:
         """(4, S) rest, stiffness, damping, strain limit (inf: not limited) in the force pass's order."""
         limit = np.where(self.active, (1.0 + model.fabric.strain_threshold) * model.rest, np.inf)
         return np.ascontiguousarray(np.stack([model.rest, model.stiffness, model.spring_c, limit])[:, model.runs.perm])
+
+    def _guard_limits(self, threshold: float) -> np.ndarray:
+        """The squared lengths past which K.guard_positions flags a spring (run order): a hair
+        below ((1 + threshold) rest)^2 -- a superset of the long ones, whatever the rounding --
+        and inf for the springs the strain limit leaves alone."""
+        if self._guard_lim2[0] != threshold:
+            m = self.model
+            lim = (1.0 + threshold) * m.rest
+            lim2 = np.where(self.active, lim * lim * (1.0 - 1e-9), np.inf)[m.runs.perm]
+            self._guard_lim2 = (threshold, np.ascontiguousarray(lim2))
+        return self._guard_lim2[1]
 
     def restiffen(self, model: ClothModel, dt: float) -> None:
         """Go on with `model` -- the same cloth (springs, masses, rest lengths) with other spring
@@ -133,6 +147,7 @@ class ClothSolver:
             model.__dict__["runs"] = old.runs
         self.model, self.dt = model, float(dt)
         self._sprops = self._spring_props(model)
+        self._guard_lim2 = (None, None)
 
     def step(self, state: ClothState, gravity_scale: float = 1.0, damping_scale: float = 1.0,
              friction_scale: float = 1.0) -> None:
@@ -187,13 +202,13 @@ class ClothSolver:
         elif self.strain_guard is not None:
             # what the velocity modification could not hold (the body pushing a band outward);
             # the velocity that would stretch the guarded springs again goes (K.inelastic_guard)
-            self.x_guard[:] = state.x
-            self.guarded = K.provot_positions(state.x, m.springs, m.rest, self.active,
-                                              m.fabric.strain_threshold + self.strain_guard, m.inv_mass,
-                                              p.vm_passes, self.vm_work, True, self.contact, self.contact_n,
-                                              p.guard_step)
-            if self.guarded:
-                K.inelastic_guard(state.x, self.x_guard, state.v)
+            thr = m.fabric.strain_threshold + self.strain_guard
+            r = m.runs
+            self.guarded = K.guard_positions(state.x, state.v, m.springs, m.rest, self.active, thr, m.inv_mass,
+                                             p.vm_passes, self.vm_work, self.contact, self.contact_n, p.guard_step,
+                                             r.perm, r.runs, r.springs, r.n_run, self._guard_limits(thr), self._soa,
+                                             self._listed, self._listed_words, m.adj_ptr, m.adj_spring,
+                                             self.x_guard, self._saved, self._saved_list)
         t3 = time.perf_counter()
         self.timing["cloth"] += (t1 - t0) + (t3 - t2)
         self.timing["collision"] += t2 - t1
