@@ -5,7 +5,8 @@ cloth vertices, seconds per frame, frames per second, the realtime factor (simul
 wall second of the walking stage) and ms per frame split into maps, cloth and collision -- once
 with one walk cycle of maps rendered and reused, once with maps rendered every frame. The seed's
 figures (1 GHz PC + GeForce2, 2001; their frame included reading the body and drawing) are
-printed beside ours at about the seed's vertex counts, and at our default 1.5 cm cloth. Issue 4's
+printed beside ours at about the seed's vertex counts; the dress also runs at the goal's ~4,000
+vertices; every product at our default 1.5 cm cloth. Issue 4's
 goal: realtime factor >= 1.0 for a ~4,000-vertex dress with reused maps, >= 0.3 with maps every
 frame.
 
@@ -23,6 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 # seed 000, Table 2: product -> (vertices, seconds per frame)
 SEED = {"skirt": (672, 0.244), "shirt": (2300, 0.294)}  # "dress with sleeves": our shirt has sleeves
+GOAL = {"dress": 4000}  # issue 4's goal is stated for a ~4,000-vertex dress (our 1.5 cm dress has ~4,400)
 LABEL = {"skirt": "skirt", "dress": "dress", "shirt": "shirt (seed: dress with sleeves)"}
 
 
@@ -32,6 +34,8 @@ def main() -> None:
     ap.add_argument("--garments", default="skirt,dress,shirt")
     ap.add_argument("--seconds", type=float, default=2.0, help="walk length after the 0.5 s start")
     ap.add_argument("--no-seed-size", action="store_true", help="skip the runs at the seed's vertex counts")
+    ap.add_argument("--no-goal-size", action="store_true",
+                    help="skip the run at the goal's vertex count (the dress at ~4,000 vertices)")
     a = ap.parse_args()
 
     from bench_drape import resolution_for
@@ -49,6 +53,8 @@ def main() -> None:
     for g in a.garments.split(","):
         spec, place, label = resolve_garment(g, body, "M")
         sizes = [0.015]
+        if g in GOAL and not a.no_goal_size:
+            sizes.insert(0, resolution_for(spec, place, GOAL[g]))
         if g in SEED and not a.no_seed_size:
             sizes.insert(0, resolution_for(spec, place, SEED[g][0]))
         for h in sizes:
@@ -81,8 +87,11 @@ def main() -> None:
         m = r["ms_per_frame"]
         sv = SEED.get(g)
         seed = f"{sv[0]} | {sv[1]:.3f} | {1 / sv[1]:.1f}" if sv and abs(nv - sv[0]) < 0.3 * sv[0] else "| |"
+        goal = ""
+        if g in GOAL and abs(nv - GOAL[g]) < 0.05 * GOAL[g]:
+            goal = f" (goal >= {1.0 if reuse else 0.3:.1f})"
         print(f"| {LABEL.get(g, g)} | {nv} | {'one cycle, reused' if reuse else 'every frame'} | "
-              f"{m['total'] / 1000:.3f} | {1000 / m['total']:.2f} | {r['realtime_factor']:.3f} | {m['maps']:.1f} | "
+              f"{m['total'] / 1000:.3f} | {1000 / m['total']:.2f} | {r['realtime_factor']:.3f}{goal} | {m['maps']:.1f} | "
               f"{m['cloth']:.0f} | {m['collision']:.0f} | {seed} |")
 
 

@@ -3,6 +3,7 @@ velocity modification kernel, seam welding helpers and fabrics."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -672,7 +673,7 @@ def test_collisions_every_few_steps_still_stop_a_falling_sheet(garment):
     and the reaction force holds contacts in between -- a sheet thrown at the floor at 2 m/s stops
     in the tolerance band, as with a check every step; a bad setting is refused."""
     lowest = {}
-    for every in (1, 4):
+    for every in (1, 4, 3.5):
         m = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
                         get_fabric("cotton"), H, ClothParams(collide_every=every, requery_every=1))
         s = ClothSolver(m, _CountingCollider())
@@ -684,10 +685,29 @@ def test_collisions_every_few_steps_still_stop_a_falling_sheet(garment):
         for _ in range(400):
             s.step(st)
             low = min(low, float(st.x[:, 1].min()))
-        assert s.collider.calls == 400 // every
+        assert s.collider.calls == math.ceil(400 / every)  # (3.5: at steps 0, 4, 7, 11, 14, ...)
         lowest[every] = low
-    assert lowest[1] > 0.0 and lowest[4] > 0.0, lowest  # never below the floor (the band is 0 .. 5 mm)
-    assert abs(lowest[4] - lowest[1]) < 0.002
+    assert min(lowest.values()) > 0.0, lowest  # never below the floor (the band is 0 .. 5 mm)
+    assert abs(lowest[4] - lowest[1]) < 0.002 and abs(lowest[3.5] - lowest[1]) < 0.002
+
+
+def test_a_fractional_collide_every_checks_that_often_on_average(garment):
+    """collide_every 2.5: checks at steps 0, 3, 5, 8, 10, ... (start + ceil(k x 2.5)), each
+    predicting the points up to the next one; changing it starts a new schedule; a whole number
+    checks where it divides the step count, as ever."""
+    s = ClothSolver(_model(garment))
+    got = []
+    for i in range(11):
+        s.iterations = i
+        got.append(s._check_now(2.5))
+    assert got == [3, 0, 0, 2, 0, 3, 0, 0, 2, 0, 3]
+    s.iterations = 12
+    assert s._check_now(1.5) == 2  # a new schedule from here: 12, 14, 15, 17
+    s.iterations = 13
+    assert s._check_now(1.5) == 0
+    s.iterations = 14
+    assert s._check_now(1.5) == 1
+    assert [s._check_now(4) if not setattr(s, "iterations", i) else None for i in (16, 17, 20)] == [4, 0, 4]
     with pytest.raises(InputError, match="collide_every"):
         build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
                     get_fabric("cotton"), H, ClothParams(collide_every=0))

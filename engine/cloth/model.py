@@ -60,7 +60,8 @@ class ClothParams:
     # drape suite's strain (max 5.7 %, limit 6 %) for 12-20 % less time an iteration (dress,
     # trousers; 4 passes left the dress at 5.9 %)
     contact_rounds: int = 4  # alternations of strain limit and collision response per step
-    collide_every: int = 1  # steps between collision checks (see ClothSolver.step). The drape checks
+    collide_every: float = 1  # steps between collision checks (see ClothSolver.step; a fraction:
+    # that many apart on average, ClothSolver._check_now). The drape checks
     # every step: measured, every 2 or 4 steps left the shirt at 6.1-6.3 % strain (limit
     # 6 %); walking checks every 4 (engine.scene.walk.WalkOptions)
     recover: float = 0.002  # s: a spring's excess over the strain limit is worked off over this long

@@ -14,6 +14,7 @@ A collider answers, for M points, (status (M,) int8: 0 clear / 1 in the toleranc
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Protocol
 
@@ -116,6 +117,7 @@ class ClothSolver:
         self.recover = p.recover  # ... and the strain recovery (it would fight the seam pull)
         self.sewing = None  # (pairs, welded, tau, vmax) while sewing: see engine.cloth.welds
         self._q, self._q_age, self._q_version = None, 0, None  # the last map answer (see _contacts)
+        self._schedule = None  # a fractional collide_every's check schedule (_check_now)
 
     def _spring_props(self, model: ClothModel) -> np.ndarray:
         """(4, S) rest, stiffness, damping, strain limit (inf: not limited) in the force pass's order."""
@@ -178,8 +180,9 @@ class ClothSolver:
         # `collide_every` steps, the points predicted that many steps ahead; in between the
         # reaction force (eq. 16, in the force pass) keeps contacts from pressing in, and
         # hold_contacts keeps the strain limit and the seams from moving them in
-        if self.collider is not None and self.iterations % p.collide_every == 0:
-            K.collision_points(state.x, state.v, dt * p.collide_every, m.quads, m.tris, self.points)
+        ahead = self._check_now(p.collide_every) if self.collider is not None else 0
+        if ahead:
+            K.collision_points(state.x, state.v, dt * ahead, m.quads, m.tris, self.points)
             status, normal, bvel, depth = self._contacts()
             # The body's push and the strain limit can disagree (a waistband sliding down the hips
             # is pushed outward while it may not stretch): alternate the two velocity changes a
@@ -213,6 +216,24 @@ class ClothSolver:
         self.timing["cloth"] += (t1 - t0) + (t3 - t2)
         self.timing["collision"] += t2 - t1
         self.iterations += 1
+
+    def _check_now(self, every: float) -> int:
+        """Whether this step checks collisions: 0 if not, else the steps until the next check
+        (how far ahead the points are predicted). A whole `every` checks at the iterations it
+        divides; a fractional one (the walk's: as often as the body's travel asks, not rounded
+        down to whole steps) at start + ceil(k * every), k = 0, 1, ..., start being the iteration
+        it was first used at -- checks `every` steps apart on average, floor or ceil of it each."""
+        e = float(every)
+        if e.is_integer():
+            return int(e) if self.iterations % int(e) == 0 else 0
+        sched = self._schedule
+        if sched is None or sched[0] != e:
+            sched = self._schedule = [e, self.iterations, 0, self.iterations]  # every, start, k, next
+        if self.iterations < sched[3]:
+            return 0
+        sched[2] += 1
+        sched[3] = sched[1] + math.ceil(sched[2] * e - 1e-9)
+        return sched[3] - self.iterations
 
     def _contacts(self):
         """The collider's answer for self.points. Asking the maps is the costliest part of a step,
