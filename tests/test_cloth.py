@@ -835,14 +835,19 @@ def test_spring_runs_hold_every_spring_once():
     assert r is m.runs  # made once per model
     assert np.array_equal(np.sort(r.perm), np.arange(len(m.springs)))
     assert np.array_equal(r.springs, m.springs[r.perm])
-    covered = 0
-    for first, a0, b0, length in r.runs:
-        assert first == covered and length >= MIN_RUN
-        t = np.arange(length)
-        assert np.array_equal(r.springs[first:first + length], np.stack([a0 + t, b0 + t], axis=1))
-        covered += length
-    assert covered == r.n_run
-    assert r.n_run >= 0.85 * len(m.springs), r.n_run / len(m.springs)
+    # the flexion springs are the slow group, after the others
+    assert r.n_fast == np.count_nonzero(m.kind != FLEXION)
+    assert np.all(m.kind[r.perm[:r.n_fast]] != FLEXION) and np.all(m.kind[r.perm[r.n_fast:]] == FLEXION)
+    for runs, covered, n_in in ((r.runs[:r.r_fast], 0, r.n_run), (r.runs[r.r_fast:], r.n_fast, r.n_run_slow)):
+        start = covered
+        for first, a0, b0, length in runs:
+            assert first == covered and length >= MIN_RUN
+            t = np.arange(length)
+            assert np.array_equal(r.springs[first:first + length], np.stack([a0 + t, b0 + t], axis=1))
+            covered += length
+        assert covered - start == n_in
+    assert r.n_run + r.n_run_slow >= 0.85 * len(m.springs), (r.n_run + r.n_run_slow) / len(m.springs)
+    assert r.fast.n_run == r.n_run and len(r.fast.perm) == r.n_fast
     # a scattered spring list has no runs and is all done one by one
     one = spring_runs(np.array([[0, 5], [3, 1], [7, 2]], np.int32))
     assert one.n_run == 0 and one.runs.shape == (0, 4) and sorted(one.perm) == [0, 1, 2]
@@ -868,7 +873,7 @@ def test_force_pass_matches_a_direct_sum():
                                          solver._sprops, GRAVITY, damping, solver.contact, solver.contact_n, mu,
                                          dt, solver.f, solver.vm_work, solver.vm_geo, solver._soa, solver._run_tmp,
                                          solver._lengths, solver._listed, solver._listed_words,
-                                         solver._geo_s)
+                                         solver._geo_s, r.r_fast, r.n_fast, r.n_run_slow, True, solver._f_slow)
     a, b = m.springs[:, 0], m.springs[:, 1]
     d = x[b] - x[a]
     length = np.linalg.norm(d, axis=1)
@@ -894,6 +899,33 @@ def test_force_pass_matches_a_direct_sum():
     geo = solver.vm_geo[:n_over]
     assert np.allclose(geo[:, :3], d[listed] / length[listed, None])
     assert np.allclose(geo[:, 3], length[listed] - (1 + m.fabric.strain_threshold) * m.rest[listed])
+    # a step where the flexion springs are not due: their forces are the ones evaluated above
+    # (at x), the others' at the new positions
+    x2 = x + rng.normal(0, 0.002, x.shape)
+    solver.contact[:] = False
+    v2 = v.copy()
+    K.eval_forces_and_integrate(x2, v2, m.inv_mass, m.mass, r.springs, r.perm, r.runs, r.n_run,
+                                solver._sprops, GRAVITY, damping, solver.contact, solver.contact_n, mu,
+                                dt, solver.f, solver.vm_work, solver.vm_geo, solver._soa, solver._run_tmp,
+                                solver._lengths, solver._listed, solver._listed_words,
+                                solver._geo_s, r.r_fast, r.n_fast, r.n_run_slow, False, solver._f_slow)
+    flex = m.kind == FLEXION
+    xs = np.where(flex[:, None], x[b] - x[a], x2[b] - x2[a])  # each spring's vector where it was evaluated
+    ls = np.linalg.norm(xs, axis=1)
+    cs = (m.stiffness * (ls - m.rest) + m.spring_c * np.einsum("ij,ij->i", v[b] - v[a], xs) / ls) / ls
+    f2 = m.mass[:, None] * GRAVITY - damping * m.mass[:, None] * v
+    np.add.at(f2, a, cs[:, None] * xs)
+    np.add.at(f2, b, -cs[:, None] * xs)
+    assert np.abs(solver.f - f2).max() <= 1e-9 * np.abs(f2).max()
+    # (which differs from evaluating them at x2: the check above can tell)
+    d2 = x2[b] - x2[a]
+    l2 = np.linalg.norm(d2, axis=1)
+    c2 = (m.stiffness * (l2 - m.rest) + m.spring_c * np.einsum("ij,ij->i", v[b] - v[a], d2) / l2) / l2
+    change = np.where(flex[:, None], c2[:, None] * d2 - cs[:, None] * xs, 0.0)  # flexion at x2 instead of x
+    fresh = f2.copy()
+    np.add.at(fresh, a, change)
+    np.add.at(fresh, b, -change)
+    assert np.abs(solver.f - fresh).max() > 1e3 * 1e-9 * np.abs(f2).max()
 
 
 def test_strain_guard_never_pulls_a_contact_into_the_body():
@@ -936,7 +968,7 @@ def test_guard_positions_is_the_plain_guard_bit_for_bit(garment):
     solver = ClothSolver(m)
     x2, v2, r = x0.copy(), v0.copy(), m.runs
     n2 = K.guard_positions(x2, v2, m.springs, m.rest, active, thr, m.inv_mass, 6, solver.vm_work, contact, normal,
-                           0.0003, r.perm, r.runs, r.springs, r.n_run, solver._guard_limits(thr), solver._soa,
+                           0.0003, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run, solver._guard_limits(thr), solver._soa,
                            solver._listed, solver._listed_words, m.adj_ptr, m.adj_spring, solver.x_guard,
                            solver._saved, solver._saved_list)
     assert n2 == n1
@@ -947,7 +979,7 @@ def test_guard_positions_is_the_plain_guard_bit_for_bit(garment):
     # nothing long: nothing moves
     x3, v3 = garment.positions.copy(), v0.copy()
     assert K.guard_positions(x3, v3, m.springs, m.rest, active, thr, m.inv_mass, 6, solver.vm_work, contact, normal,
-                             0.0003, r.perm, r.runs, r.springs, r.n_run, solver._guard_limits(thr), solver._soa,
+                             0.0003, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run, solver._guard_limits(thr), solver._soa,
                              solver._listed, solver._listed_words, m.adj_ptr, m.adj_spring, solver.x_guard,
                              solver._saved, solver._saved_list) == 0
     np.testing.assert_array_equal(x3, garment.positions)

@@ -61,7 +61,7 @@ def test_serial_kernels_compile_without_parallel_loops():
     K.inelastic_guard(state.x, solver.x_guard, state.v)
     r = m.runs
     K.guard_positions(state.x, state.v, m.springs, m.rest, solver.active, 0.05, m.inv_mass, 2, solver.vm_work,
-                      solver.contact, solver.contact_n, 0.001, r.perm, r.runs, r.springs, r.n_run,
+                      solver.contact, solver.contact_n, 0.001, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run,
                       solver._guard_limits(0.05), solver._soa, solver._listed, solver._listed_words, m.adj_ptr,
                       m.adj_spring, solver.x_guard, solver._saved, solver._saved_list)
     # the response on its own (the solver's contact_rounds does the same work; tests/test_cloth.py

@@ -31,10 +31,57 @@ MIN_NZ = 0.2  # see _depth_rate
 VM_MODES = {"zero": VM_ZERO, "average": VM_AVERAGE, "directional": VM_DIRECTIONAL, "provot": VM_PROVOT}
 
 
+@njit(fastmath=True, cache=True, inline="always")
+def _axial(dx, dy, dz, du, dw, dq, rest, k, c_damp):
+    """A spring's force per unit of its vector (dx, dy, dz), the other end's relative velocity
+    (du, dw, dq): stiffness times extension plus damping of the rate of stretch, over the length;
+    and the length."""
+    l2 = dx * dx + dy * dy + dz * dz
+    inv = 1.0 / np.sqrt(l2 + 1e-30)
+    length = l2 * inv
+    rate = (du * dx + dw * dy + dq * dz) * inv
+    return (k * (length - rest) + c_damp * rate) * inv, length
+
+
+@njit(fastmath=True, cache=True, inline="always")
+def _scatter_run(fx, fy, fz, tx, ty, tz, a0, b0, m):
+    """A run's spring forces (tmp rows tx, ty, tz) added to its a ends and taken from its b ends."""
+    fa, ga, ha = fx[a0:a0 + m], fy[a0:a0 + m], fz[a0:a0 + m]
+    for t in range(m):
+        fa[t] += tx[t]
+        ga[t] += ty[t]
+        ha[t] += tz[t]
+    fb, gb, hb = fx[b0:b0 + m], fy[b0:b0 + m], fz[b0:b0 + m]
+    for t in range(m):
+        fb[t] -= tx[t]
+        gb[t] -= ty[t]
+        hb[t] -= tz[t]
+
+
+@njit(fastmath=True, cache=True, inline="always")
+def _single_spring(s, sp, xs, ys, zs, vx, vy, vz, rest, k, spring_c, fx, fy, fz):
+    """Spring s (outside runs) added to the forces."""
+    a = sp[s, 0]
+    b = sp[s, 1]
+    dx = xs[b] - xs[a]
+    dy = ys[b] - ys[a]
+    dz = zs[b] - zs[a]
+    length = np.sqrt(dx * dx + dy * dy + dz * dz)
+    if length > 1e-12:
+        rate = ((vx[b] - vx[a]) * dx + (vy[b] - vy[a]) * dy + (vz[b] - vz[a]) * dz) / length
+        c = (k[s] * (length - rest[s]) + spring_c[s] * rate) / length
+        fx[a] += c * dx
+        fy[a] += c * dy
+        fz[a] += c * dz
+        fx[b] -= c * dx
+        fy[b] -= c * dy
+        fz[b] -= c * dz
+
+
 @serial_kernel(error_model="numpy")
 def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprops, gravity, damping,
                               contact, contact_n, mu, dt, f_out, work, geo, soa, tmp, lengths, listed, listed_words,
-                              geo_s):
+                              geo_s, r_fast, n_fast, n_run_slow, slow_due, f_slow):
     """Springs (eq. 2) with damping along each spring, gravity, viscous damping, then the
     reaction force of seed 000 eq. 16 where the vertex touched the body in the previous step
     (cancel the force into the body, Coulomb friction on the tangential part), then the velocity
@@ -51,6 +98,11 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
     The springs outside runs are done one by one. Measured on a captured step of the dress
     (4,374 vertices, 25.5k springs, 93 % in runs): the whole kernel 0.24 ms median instead of
     0.35 ms for one pass over all springs one by one.
+
+    The slow group (SpringRuns: runs[r_fast:], springs from n_fast on; the flexion springs,
+    ClothParams.flexion_every) is evaluated only when slow_due: its forces go to f_slow (3, N),
+    which every step adds in as it was last evaluated (multiple time stepping: the force of a
+    spring thousands of times softer than the stretch springs, held over a few steps).
 
     The same pass lists the springs longer than their listing length in `work` (their
     model indices; directions and excesses in `geo`, see _store_geo) and returns their count:
@@ -74,13 +126,38 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
         vx[i] = v[i, 0]
         vy[i] = v[i, 1]
         vz[i] = v[i, 2]
-        fx[i] = mass[i] * gravity[0] - damping * mass[i] * v[i, 0]
-        fy[i] = mass[i] * gravity[1] - damping * mass[i] * v[i, 1]
-        fz[i] = mass[i] * gravity[2] - damping * mass[i] * v[i, 2]
     rest, k, spring_c, limits = sprops[0], sprops[1], sprops[2], sprops[3]
     tx, ty, tz = tmp[0], tmp[1], tmp[2]
+    sx, sy, sz = f_slow[0], f_slow[1], f_slow[2]
+    if slow_due:
+        for i in range(n):
+            sx[i] = 0.0
+            sy[i] = 0.0
+            sz[i] = 0.0
+        for r in range(r_fast, runs.shape[0]):
+            s0, a0, b0, m = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3]
+            xa, ya, za = xs[a0:a0 + m], ys[a0:a0 + m], zs[a0:a0 + m]
+            xb, yb, zb = xs[b0:b0 + m], ys[b0:b0 + m], zs[b0:b0 + m]
+            ua, wa, qa = vx[a0:a0 + m], vy[a0:a0 + m], vz[a0:a0 + m]
+            ub, wb, qb = vx[b0:b0 + m], vy[b0:b0 + m], vz[b0:b0 + m]
+            r_, k_, c_ = rest[s0:s0 + m], k[s0:s0 + m], spring_c[s0:s0 + m]
+            for t in range(m):
+                dx = xb[t] - xa[t]
+                dy = yb[t] - ya[t]
+                dz = zb[t] - za[t]
+                c, _ = _axial(dx, dy, dz, ub[t] - ua[t], wb[t] - wa[t], qb[t] - qa[t], r_[t], k_[t], c_[t])
+                tx[t] = c * dx
+                ty[t] = c * dy
+                tz[t] = c * dz
+            _scatter_run(sx, sy, sz, tx, ty, tz, a0, b0, m)
+        for s in range(n_fast + n_run_slow, sp.shape[0]):
+            _single_spring(s, sp, xs, ys, zs, vx, vy, vz, rest, k, spring_c, sx, sy, sz)
+    for i in range(n):
+        fx[i] = mass[i] * gravity[0] - damping * mass[i] * vx[i] + sx[i]
+        fy[i] = mass[i] * gravity[1] - damping * mass[i] * vy[i] + sy[i]
+        fz[i] = mass[i] * gravity[2] - damping * mass[i] * vz[i] + sz[i]
     n_act = 0
-    for r in range(runs.shape[0]):
+    for r in range(r_fast):
         s0, a0, b0, m = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3]
         xa, ya, za = xs[a0:a0 + m], ys[a0:a0 + m], zs[a0:a0 + m]
         xb, yb, zb = xs[b0:b0 + m], ys[b0:b0 + m], zs[b0:b0 + m]
@@ -92,12 +169,7 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
             dx = xb[t] - xa[t]
             dy = yb[t] - ya[t]
             dz = zb[t] - za[t]
-            l2 = dx * dx + dy * dy + dz * dz
-            inv = 1.0 / np.sqrt(l2 + 1e-30)
-            length = l2 * inv
-            # spring force plus damping of the spring's rate of stretch (along the spring)
-            rate = ((ub[t] - ua[t]) * dx + (wb[t] - wa[t]) * dy + (qb[t] - qa[t]) * dz) * inv
-            c = (k_[t] * (length - r_[t]) + c_[t] * rate) * inv
+            c, length = _axial(dx, dy, dz, ub[t] - ua[t], wb[t] - wa[t], qb[t] - qa[t], r_[t], k_[t], c_[t])
             tx[t] = c * dx
             ty[t] = c * dy
             tz[t] = c * dz
@@ -111,17 +183,8 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
                     listed[perm[s]] = 1
                     _store_geo(geo_s, perm[s], xs[b] - xs[a], ys[b] - ys[a], zs[b] - zs[a], lengths[s], limits[s])
                     n_act += 1
-        fa, ga, ha = fx[a0:a0 + m], fy[a0:a0 + m], fz[a0:a0 + m]
-        for t in range(m):
-            fa[t] += tx[t]
-            ga[t] += ty[t]
-            ha[t] += tz[t]
-        fb, gb, hb = fx[b0:b0 + m], fy[b0:b0 + m], fz[b0:b0 + m]
-        for t in range(m):
-            fb[t] -= tx[t]
-            gb[t] -= ty[t]
-            hb[t] -= tz[t]
-    for s in range(n_run, sp.shape[0]):
+        _scatter_run(fx, fy, fz, tx, ty, tz, a0, b0, m)
+    for s in range(n_run, n_fast):
         a = sp[s, 0]
         b = sp[s, 1]
         dx = xs[b] - xs[a]

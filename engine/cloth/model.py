@@ -65,6 +65,10 @@ class ClothParams:
     # every step: measured, every 2 or 4 steps left the shirt at 6.1-6.3 % strain (limit
     # 6 %); walking checks every 4 (engine.scene.walk.WalkOptions)
     recover: float = 0.002  # s: a spring's excess over the strain limit is worked off over this long
+    flexion_every: int = 4  # steps between evaluations of the flexion springs' forces, held in
+    # between (engine.cloth.kernels.eval_forces_and_integrate). They are ~7,500 x softer than the
+    # stretch springs (cotton at 1.5 cm: 0.044 against 327 N/m), so their force changes little in
+    # a few steps of the stretch springs' eq. 4 bound, and they are a third of the springs
     requery_move: float = 0.001  # m: the maps are asked again once a checked point moved this far ...
     requery_every: int = 8  # ... or after this many steps (between queries the answers are carried)
     guard_step: float = 0.0003  # m: the strain guard shortens a spring by at most this per pass
@@ -110,36 +114,66 @@ class ClothModel:
 
     @cached_property
     def runs(self) -> "SpringRuns":
-        """The springs in the order of the force pass (see SpringRuns), made once per model."""
-        return spring_runs(self.springs)
+        """The springs in the order of the force pass (see SpringRuns; the flexion springs as its
+        slow group), made once per model."""
+        return spring_runs(self.springs, slow=self.kind == FLEXION)
 
 
 MIN_RUN = 8  # shortest run of springs the force pass takes as one vector loop (4 doubles a
 # vector; a run's own cost, ~20 ns, outweighs the gain below this)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class SpringRuns:
     """The springs ordered for the force pass (engine.cloth.kernels.eval_forces_and_integrate):
     runs first -- springs (a0 + t, b0 + t) for t < L, L >= MIN_RUN, as a grid row and the next
     row (or the same row shifted) give them -- then the rest.
     perm (S,) int64: the model's index of each spring in this order; springs (S, 2) int32 =
     model springs[perm], ends as in the model; runs (R, 4) int64: (first position in this order,
-    a0, b0, L); n_run: the springs in runs (they come first)."""
+    a0, b0, L); n_run: the springs in runs (they come first).
+    With a slow group (spring_runs' `slow`, the force pass evaluates it every few steps only):
+    the fast springs come first, ordered as above (runs[:r_fast], n_run of them in runs, n_fast
+    in all), then the slow ones, ordered the same way (runs[r_fast:], their n_run_slow springs in
+    runs from position n_fast on, then the rest)."""
 
     perm: np.ndarray
     springs: np.ndarray
     runs: np.ndarray
     n_run: int
+    r_fast: int = -1
+    n_fast: int = -1
+    n_run_slow: int = 0
+
+    def __post_init__(self):
+        if self.r_fast < 0:  # no slow group
+            object.__setattr__(self, "r_fast", len(self.runs))
+            object.__setattr__(self, "n_fast", len(self.perm))
 
     @property
     def longest(self) -> int:
         return int(self.runs[:, 3].max(initial=1))
 
+    @cached_property
+    def fast(self) -> "SpringRuns":
+        """The fast group alone (all springs when there is no slow group)."""
+        if self.n_fast == len(self.perm):
+            return self
+        return SpringRuns(perm=self.perm[:self.n_fast], springs=self.springs[:self.n_fast],
+                          runs=self.runs[:self.r_fast], n_run=self.n_run)
 
-def spring_runs(springs: np.ndarray, min_run: int = MIN_RUN) -> SpringRuns:
+
+def spring_runs(springs: np.ndarray, min_run: int = MIN_RUN, slow: np.ndarray | None = None) -> SpringRuns:
     """Find the runs: springs sorted by end-to-end offset b - a, then by a; a run is a stretch of
-    that order where a goes up by one each spring."""
+    that order where a goes up by one each spring. slow: (S,) bool, the springs of the slow group
+    (see SpringRuns), ordered the same way after the others."""
+    if slow is not None and slow.any():
+        fast_i, slow_i = np.flatnonzero(~slow), np.flatnonzero(slow)
+        f, w = spring_runs(springs[fast_i], min_run), spring_runs(springs[slow_i], min_run)
+        perm = np.concatenate([fast_i[f.perm], slow_i[w.perm]]).astype(np.int64)
+        wr = w.runs.copy()
+        wr[:, 0] += len(fast_i)
+        return SpringRuns(perm=perm, springs=springs[perm].astype(np.int32), runs=np.concatenate([f.runs, wr]),
+                          n_run=f.n_run, r_fast=len(f.runs), n_fast=len(fast_i), n_run_slow=w.n_run)
     s = springs.astype(np.int64).reshape(-1, 2)
     d = s[:, 1] - s[:, 0]
     order = np.lexsort((s[:, 0], d))
@@ -267,6 +301,8 @@ def build_model(uv: np.ndarray, panel: np.ndarray, lattice: np.ndarray, quads: n
     params = params or ClothParams()
     if params.stiffness_scale <= 0 or not np.isfinite(params.stiffness_scale):
         raise InputError(f"stiffness scale must be positive, got {params.stiffness_scale}")
+    if not (isinstance(params.flexion_every, (int, np.integer)) and 1 <= params.flexion_every <= 16):
+        raise InputError(f"flexion_every {params.flexion_every}: evaluate flexion springs every 1 .. 16 steps")
     if not 1 <= params.collide_every <= 16:
         raise InputError(f"collide_every {params.collide_every}: check collisions every 1 .. 16 steps")
     springs, kind = build_springs(uv, panel, lattice, quads, tris)

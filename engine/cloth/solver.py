@@ -89,6 +89,7 @@ class ClothSolver:
         r = model.runs
         self._sprops = self._spring_props(model)
         self._soa = np.zeros((9, n))
+        self._f_slow = np.zeros((3, n))  # the flexion springs' forces, as last evaluated (flexion_every)
         self._run_tmp = np.zeros((3, r.longest))
         self._lengths = np.zeros(len(model.springs))
         self._listed = np.zeros(-(-len(model.springs) // 8) * 8, dtype=np.uint8)
@@ -125,13 +126,14 @@ class ClothSolver:
         return np.ascontiguousarray(np.stack([model.rest, model.stiffness, model.spring_c, limit])[:, model.runs.perm])
 
     def _guard_limits(self, threshold: float) -> np.ndarray:
-        """The squared lengths past which K.guard_positions flags a spring (run order): a hair
+        """The squared lengths past which K.guard_positions flags a spring (the force pass's
+        order, its fast group: flexion springs are never limited): a hair
         below ((1 + threshold) rest)^2 -- a superset of the long ones, whatever the rounding --
         and inf for the springs the strain limit leaves alone."""
         if self._guard_lim2[0] != threshold:
             m = self.model
             lim = (1.0 + threshold) * m.rest
-            lim2 = np.where(self.active, lim * lim * (1.0 - 1e-9), np.inf)[m.runs.perm]
+            lim2 = np.where(self.active, lim * lim * (1.0 - 1e-9), np.inf)[m.runs.fast.perm]
             self._guard_lim2 = (threshold, np.ascontiguousarray(lim2))
         return self._guard_lim2[1]
 
@@ -165,7 +167,8 @@ class ClothSolver:
                                              self.contact, self.contact_n, m.fabric.friction * friction_scale, dt,
                                              self.f, self.vm_work, self.vm_geo,
                                              self._soa, self._run_tmp, self._lengths, self._listed, self._listed_words,
-                                             self._geo_s)
+                                             self._geo_s, r.r_fast, r.n_fast, r.n_run_slow,
+                                             self.iterations % p.flexion_every == 0, self._f_slow)
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 §3)
         n_act = K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
                                     self.mode, g, dt, self.body_v, p.vm_passes,
@@ -209,7 +212,8 @@ class ClothSolver:
             r = m.runs
             self.guarded = K.guard_positions(state.x, state.v, m.springs, m.rest, self.active, thr, m.inv_mass,
                                              p.vm_passes, self.vm_work, self.contact, self.contact_n, p.guard_step,
-                                             r.perm, r.runs, r.springs, r.n_run, self._guard_limits(thr), self._soa,
+                                             r.fast.perm, r.fast.runs, r.fast.springs, r.n_run,
+                                             self._guard_limits(thr), self._soa,
                                              self._listed, self._listed_words, m.adj_ptr, m.adj_spring,
                                              self.x_guard, self._saved, self._saved_list)
         t3 = time.perf_counter()
