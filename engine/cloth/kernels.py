@@ -60,7 +60,7 @@ def _scatter_run(fx, fy, fz, tx, ty, tz, a0, b0, m):
 
 @njit(fastmath=True, cache=True, inline="always")
 def _single_spring(s, sp, xs, ys, zs, vx, vy, vz, rest, k, spring_c, fx, fy, fz):
-    """Spring s (outside runs) added to the forces."""
+    """Spring s (outside runs) added to the forces; returns its length and vector."""
     a = sp[s, 0]
     b = sp[s, 1]
     dx = xs[b] - xs[a]
@@ -76,6 +76,7 @@ def _single_spring(s, sp, xs, ys, zs, vx, vy, vz, rest, k, spring_c, fx, fy, fz)
         fx[b] -= c * dx
         fy[b] -= c * dy
         fz[b] -= c * dz
+    return length, dx, dy, dz
 
 
 @serial_kernel(error_model="numpy")
@@ -185,26 +186,11 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
                     n_act += 1
         _scatter_run(fx, fy, fz, tx, ty, tz, a0, b0, m)
     for s in range(n_run, n_fast):
-        a = sp[s, 0]
-        b = sp[s, 1]
-        dx = xs[b] - xs[a]
-        dy = ys[b] - ys[a]
-        dz = zs[b] - zs[a]
-        length = np.sqrt(dx * dx + dy * dy + dz * dz)
-        if length > 1e-12:
-            limit = limits[s]
-            if length > limit:
-                listed[perm[s]] = 1
-                _store_geo(geo_s, perm[s], dx, dy, dz, length, limit)
-                n_act += 1
-            rate = ((vx[b] - vx[a]) * dx + (vy[b] - vy[a]) * dy + (vz[b] - vz[a]) * dz) / length
-            c = (k[s] * (length - rest[s]) + spring_c[s] * rate) / length
-            fx[a] += c * dx
-            fy[a] += c * dy
-            fz[a] += c * dz
-            fx[b] -= c * dx
-            fy[b] -= c * dy
-            fz[b] -= c * dz
+        length, dx, dy, dz = _single_spring(s, sp, xs, ys, zs, vx, vy, vz, rest, k, spring_c, fx, fy, fz)
+        if length > 1e-12 and length > limits[s]:
+            listed[perm[s]] = 1
+            _store_geo(geo_s, perm[s], dx, dy, dz, length, limits[s])
+            n_act += 1
     # the list in the model's spring order (the velocity modification's Gauss-Seidel order)
     n_list = 0
     if n_act:
@@ -514,16 +500,24 @@ def provot_positions(x, springs, rest, active, threshold, inv_mass, passes, work
                                           keep_out, contact, contact_n, max_move):
             work[n_act] = s
             n_act += 1
-    for _ in range(passes - 1):
+    _project_passes(x, springs, rest, threshold, inv_mass, passes - 1, work, n_act, keep_out, contact, contact_n,
+                    max_move)
+    return n_act
+
+
+@njit(fastmath=True, cache=True, inline="always")
+def _project_passes(x, springs, rest, threshold, inv_mass, passes, work, n_act, keep_out, contact, contact_n,
+                    max_move):
+    """Up to `passes` passes of _project_one over the springs work[:n_act], until one moves nothing."""
+    for _ in range(passes):
         changed = 0
         for k in range(n_act):
             s = work[k]
             if _project_one(x, springs[s, 0], springs[s, 1], (1.0 + threshold) * rest[s], inv_mass,
-                                          keep_out, contact, contact_n, max_move):
+                            keep_out, contact, contact_n, max_move):
                 changed += 1
         if changed == 0:
             break
-    return n_act
 
 
 @serial_kernel
@@ -611,31 +605,32 @@ def guard_positions(x, v, springs, rest, active, threshold, inv_mass, passes, wo
                         j = adj_spring[k]
                         if j > s:
                             flags[j] = 1
-    for _ in range(passes - 1):
-        changed = 0
-        for k in range(n_act):
-            s = work[k]
-            if _project_one(x, springs[s, 0], springs[s, 1], (1.0 + threshold) * rest[s], inv_mass,
-                            True, contact, contact_n, max_move):
-                changed += 1
-        if changed == 0:
-            break
+    _project_passes(x, springs, rest, threshold, inv_mass, passes - 1, work, n_act, True, contact, contact_n,
+                    max_move)
     for k in range(n_saved):
         i = saved_list[k]
         saved[i] = 0
         if n_act:
-            dx = x[i, 0] - x_before[i, 0]
-            dy = x[i, 1] - x_before[i, 1]
-            dz = x[i, 2] - x_before[i, 2]
-            dd = dx * dx + dy * dy + dz * dz
-            if dd > 0.0:
-                vd = v[i, 0] * dx + v[i, 1] * dy + v[i, 2] * dz
-                if vd < 0.0:
-                    c = vd / dd
-                    v[i, 0] -= c * dx
-                    v[i, 1] -= c * dy
-                    v[i, 2] -= c * dz
+            _inelastic_one(x, x_before, v, i)
     return n_act
+
+
+@njit(fastmath=True, cache=True, inline="always")
+def _inelastic_one(x, x_before, v, i):
+    """inelastic_guard for vertex i; True if its velocity changed."""
+    dx = x[i, 0] - x_before[i, 0]
+    dy = x[i, 1] - x_before[i, 1]
+    dz = x[i, 2] - x_before[i, 2]
+    dd = dx * dx + dy * dy + dz * dz
+    if dd > 0.0:
+        vd = v[i, 0] * dx + v[i, 1] * dy + v[i, 2] * dz
+        if vd < 0.0:
+            c = vd / dd
+            v[i, 0] -= c * dx
+            v[i, 1] -= c * dy
+            v[i, 2] -= c * dz
+            return True
+    return False
 
 
 @serial_kernel
@@ -649,18 +644,7 @@ def inelastic_guard(x, x_before, v):
     of 1.3k. Returns the number of vertices whose velocity changed."""
     n = 0
     for i in range(x.shape[0]):
-        dx = x[i, 0] - x_before[i, 0]
-        dy = x[i, 1] - x_before[i, 1]
-        dz = x[i, 2] - x_before[i, 2]
-        dd = dx * dx + dy * dy + dz * dz
-        if dd > 0.0:
-            vd = v[i, 0] * dx + v[i, 1] * dy + v[i, 2] * dz
-            if vd < 0.0:
-                c = vd / dd
-                v[i, 0] -= c * dx
-                v[i, 1] -= c * dy
-                v[i, 2] -= c * dz
-                n += 1
+        n += _inelastic_one(x, x_before, v, i)
     return n
 
 
