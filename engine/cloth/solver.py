@@ -207,9 +207,8 @@ class ClothSolver:
                                m.inv_mass, p.vm_passes, self.vm_work, False, self.contact, self.contact_n, np.inf)
         elif self.strain_guard is not None:
             # what the velocity modification could not hold (the body pushing a band outward);
-            # the velocity that would stretch the guarded springs again goes (K.inelastic_guard)
+            # the velocity that would stretch the guarded springs again goes (K.guard_positions)
             thr = m.fabric.strain_threshold + self.strain_guard
-            r = m.runs
             self.guarded = K.guard_positions(state.x, state.v, m.springs, m.rest, self.active, thr, m.inv_mass,
                                              p.vm_passes, self.vm_work, self.contact, self.contact_n, p.guard_step,
                                              r.fast.perm, r.fast.runs, r.fast.springs, r.n_run,

@@ -74,12 +74,13 @@ class BodySections:
         1 cm of each (x, y), from its cut at the nearest 1 cm; NaN where the body is not."""
         rows = np.round(np.asarray(y) / 0.01).astype(int)
         out = np.full(len(rows), np.nan)
-        todo = [r for r in np.unique(rows) if r not in self._cuts]
+        uniq = np.unique(rows)
+        todo = [r for r in uniq if r not in self._cuts]
         if todo:  # the new cuts at once (slice_stack sorts the faces to the cuts once; each cut
             # alone cost 6.5 ms on the default body, 49 of them a third of the dress's placement)
             for r, pieces in zip(todo, slice_stack(self._v, self._f, np.array(todo) * 0.01)):
                 self._cuts[r] = pieces
-        for r in np.unique(rows):
+        for r in uniq:
             prof = self._profiles.get((r, side))
             if prof is None:
                 pieces = self._cuts[r]
