@@ -1,15 +1,21 @@
-"""A/B benchmark of the dressing step: this checkout against another one (a git worktree of an
-older commit, say), the two run in turns in the same minutes -- on a shared machine whose speed
-drifts by tens of percent within minutes, only runs interleaved like this compare (a script that
-prints a table; not a test).
+"""A/B benchmark of the dressing step, or of walking: this checkout against another one (a git
+worktree of an older commit, say), the two run in turns in the same minutes -- on a shared
+machine whose speed drifts by tens of percent within minutes, only runs interleaved like this
+compare (a script that prints a table; not a test).
 
 Each run is a fresh process: a coarse skirt first (numba compiles or loads its kernels), then
 the garment timed. Printed per run and as medians: ms per iteration (cloth, collision),
 iterations, wall seconds, strain max, and a hash of the final vertices (equal hashes: the two
 checkouts computed the same drape bit for bit).
 
+With --walk SECONDS the garment is dressed (not timed) and then walks (default:female's walk
+at 1.2 m/s, 30 fps, one cycle of maps reused): realtime factor, ms per frame (maps, cloth,
+collision), penetration and strain max, and a hash of all the garment's frames. The ratio
+printed last is the median of each round's this / other (a drift between rounds cancels).
+
     git worktree add /tmp/base <commit> && ln -s "$PWD/.venv" /tmp/base/.venv
     .venv/bin/python scripts/bench_ab.py /tmp/base [--garment dress] [--edge-cm 1.5] [--rounds 3]
+    .venv/bin/python scripts/bench_ab.py /tmp/base --walk 2 [--edge-cm 1.59]
 """
 
 from __future__ import annotations
@@ -41,10 +47,32 @@ print(json.dumps({"ms_it": ms["total"], "cloth": ms["cloth"], "collision": ms["c
                   "strain": rep["strain"]["max"], "hash": hashlib.md5(res.positions.tobytes()).hexdigest()[:8]}))
 """
 
+CHILD_WALK = r"""
+import hashlib, json, sys
+sys.path.insert(0, sys.argv[1])
+from engine.body import resolve_body
+from engine.scene.garments import resolve_garment
+from engine.scene.tryon import run_tryon
+from engine.scene.walk import WalkOptions, walk_cloth
+body = resolve_body(sys.argv[2])
+spec, place, label = resolve_garment("skirt", body, "M")
+res, _ = run_tryon(body, spec, h=0.06, place=place, source=label)
+walk_cloth(body, res, WalkOptions(seconds=0.1), texel=0.005, tol=res.model.params.tolerance)
+spec, place, label = resolve_garment(sys.argv[3], body, sys.argv[4])
+res, _ = run_tryon(body, spec, h=float(sys.argv[5]), place=place, source=label)
+w = walk_cloth(body, res, WalkOptions(seconds=float(sys.argv[6])), texel=0.005, tol=res.model.params.tolerance)
+r = w.report
+print(json.dumps({"realtime": r["realtime_factor"], **{k: r["ms_per_frame"][k] for k in ("maps", "cloth", "collision", "total")},
+                  "vertices": res.model.n, "pen": r["penetration_mm"]["max"],
+                  "strain": max(f["strain_max"] for f in r["per_frame"]),
+                  "hash": hashlib.md5(w.garment_frames.tobytes()).hexdigest()[:8]}))
+"""
+
 
 def run_one(root: Path, args) -> dict:
-    out = subprocess.run([sys.executable, "-c", CHILD, str(root), args.body, args.garment, args.size,
-                          str(args.edge_cm / 100)], capture_output=True, text=True)
+    child, extra = (CHILD, []) if args.walk is None else (CHILD_WALK, [str(args.walk)])
+    out = subprocess.run([sys.executable, "-c", child, str(root), args.body, args.garment, args.size,
+                          str(args.edge_cm / 100), *extra], capture_output=True, text=True)
     if out.returncode != 0:
         sys.exit(f"{root}: the try-on failed:\n{out.stderr.strip().splitlines()[-1] if out.stderr else ''}")
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -58,12 +86,19 @@ def main() -> None:
     ap.add_argument("--size", default="M")
     ap.add_argument("--edge-cm", type=float, default=1.5)
     ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--walk", type=float, default=None, metavar="SECONDS",
+                    help="time walking this long (after the drape) instead of the drape")
     args = ap.parse_args()
     if not (args.other / "engine").is_dir():
         sys.exit(f"{args.other} holds no engine/: give the root of another checkout of this project")
     if not (1 <= args.rounds <= 50):
         sys.exit("--rounds: use 1 .. 50")
+    if args.walk is not None and not (0.1 <= args.walk <= 20):
+        sys.exit("--walk: walk 0.1 .. 20 seconds")
     roots = {"this": HERE, "other": args.other.resolve()}
+    if args.walk is not None:
+        walk_ab(roots, args)
+        return
     rows: dict[str, list[dict]] = {k: [] for k in roots}
     print(f"{args.garment} ({args.size}) on {args.body}, {args.edge_cm:g} cm cloth; this = {HERE}, other = {roots['other']}")
     print("| run | checkout | ms/it | cloth | collision | iterations | wall s | strain % | hash |")
@@ -81,6 +116,28 @@ def main() -> None:
               f"wall {med['wall']:.2f} s")
     a, b = (statistics.median(x["ms_it"] for x in rows[k]) for k in ("this", "other"))
     print(f"this / other, ms per iteration: {a / b:.2f}")
+
+
+def walk_ab(roots: dict[str, Path], args) -> None:
+    rows: dict[str, list[dict]] = {k: [] for k in roots}
+    print(f"{args.garment} ({args.size}) on {args.body}, {args.edge_cm:g} cm cloth, walking {args.walk:g} s "
+          f"(maps reused); this = {roots['this']}, other = {roots['other']}")
+    print("| run | checkout | vertices | realtime | ms/frame | maps | cloth | collision | pen max mm | strain % | hash |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in range(args.rounds):
+        for name, root in roots.items():
+            res = run_one(root, args)
+            rows[name].append(res)
+            print(f"| {r + 1} | {name} | {res['vertices']} | {res['realtime']:.3f} | {res['total']:.1f} | "
+                  f"{res['maps']:.1f} | {res['cloth']:.1f} | {res['collision']:.1f} | {res['pen']:.2f} | "
+                  f"{100 * res['strain']:.1f} | {res['hash']} |", flush=True)
+    print()
+    for name, rs in rows.items():
+        med = {k: statistics.median(x[k] for x in rs) for k in ("realtime", "total", "cloth", "collision")}
+        print(f"median {name}: realtime {med['realtime']:.3f}, {med['total']:.1f} ms/frame "
+              f"(cloth {med['cloth']:.1f}, collision {med['collision']:.1f})")
+    ratio = statistics.median(a["total"] / b["total"] for a, b in zip(rows["this"], rows["other"]))
+    print(f"this / other, ms per frame (median of the rounds' ratios): {ratio:.2f}")
 
 
 if __name__ == "__main__":
