@@ -99,17 +99,12 @@ def main() -> None:
     if args.walk is not None:
         walk_ab(roots, args)
         return
-    rows: dict[str, list[dict]] = {k: [] for k in roots}
     print(f"{args.garment} ({args.size}) on {args.body}, {args.edge_cm:g} cm cloth; this = {HERE}, other = {roots['other']}")
-    print("| run | checkout | ms/it | cloth | collision | iterations | wall s | strain % | hash |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    for r in range(args.rounds):
-        for name, root in roots.items():
-            res = run_one(root, args)
-            rows[name].append(res)
-            print(f"| {r + 1} | {name} | {res['ms_it']:.3f} | {res['cloth']:.3f} | {res['collision']:.3f} | "
-                  f"{res['iterations']} | {res['wall']:.2f} | {100 * res['strain']:.2f} | {res['hash']} |", flush=True)
-    print()
+    rows = run_rounds(roots, args, [
+        ("ms/it", lambda r: f"{r['ms_it']:.3f}"), ("cloth", lambda r: f"{r['cloth']:.3f}"),
+        ("collision", lambda r: f"{r['collision']:.3f}"), ("iterations", lambda r: f"{r['iterations']}"),
+        ("wall s", lambda r: f"{r['wall']:.2f}"), ("strain %", lambda r: f"{100 * r['strain']:.2f}"),
+        ("hash", lambda r: r["hash"])])
     for name, rs in rows.items():
         med = {k: statistics.median(x[k] for x in rs) for k in ("ms_it", "cloth", "collision", "wall")}
         print(f"median {name}: {med['ms_it']:.3f} ms/it (cloth {med['cloth']:.3f}, collision {med['collision']:.3f}), "
@@ -119,25 +114,35 @@ def main() -> None:
 
 
 def walk_ab(roots: dict[str, Path], args) -> None:
-    rows: dict[str, list[dict]] = {k: [] for k in roots}
     print(f"{args.garment} ({args.size}) on {args.body}, {args.edge_cm:g} cm cloth, walking {args.walk:g} s "
           f"(maps reused); this = {roots['this']}, other = {roots['other']}")
-    print("| run | checkout | vertices | realtime | ms/frame | maps | cloth | collision | pen max mm | strain % | hash |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
-    for r in range(args.rounds):
-        for name, root in roots.items():
-            res = run_one(root, args)
-            rows[name].append(res)
-            print(f"| {r + 1} | {name} | {res['vertices']} | {res['realtime']:.3f} | {res['total']:.1f} | "
-                  f"{res['maps']:.1f} | {res['cloth']:.1f} | {res['collision']:.1f} | {res['pen']:.2f} | "
-                  f"{100 * res['strain']:.1f} | {res['hash']} |", flush=True)
-    print()
+    rows = run_rounds(roots, args, [
+        ("vertices", lambda r: f"{r['vertices']}"), ("realtime", lambda r: f"{r['realtime']:.3f}"),
+        ("ms/frame", lambda r: f"{r['total']:.1f}"), ("maps", lambda r: f"{r['maps']:.1f}"),
+        ("cloth", lambda r: f"{r['cloth']:.1f}"), ("collision", lambda r: f"{r['collision']:.1f}"),
+        ("pen max mm", lambda r: f"{r['pen']:.2f}"), ("strain %", lambda r: f"{100 * r['strain']:.1f}"),
+        ("hash", lambda r: r["hash"])])
     for name, rs in rows.items():
         med = {k: statistics.median(x[k] for x in rs) for k in ("realtime", "total", "cloth", "collision")}
         print(f"median {name}: realtime {med['realtime']:.3f}, {med['total']:.1f} ms/frame "
               f"(cloth {med['cloth']:.1f}, collision {med['collision']:.1f})")
     ratio = statistics.median(a["total"] / b["total"] for a, b in zip(rows["this"], rows["other"]))
     print(f"this / other, ms per frame (median of the rounds' ratios): {ratio:.2f}")
+
+
+def run_rounds(roots: dict[str, Path], args, columns) -> dict[str, list[dict]]:
+    """The checkouts in turns, args.rounds times; each run printed as a table row of `columns`
+    ((header, format of a run's result) pairs). Returns each checkout's results."""
+    print("| run | checkout | " + " | ".join(h for h, _ in columns) + " |")
+    print("|---|---|" + "---|" * len(columns))
+    rows: dict[str, list[dict]] = {k: [] for k in roots}
+    for r in range(args.rounds):
+        for name, root in roots.items():
+            res = run_one(root, args)
+            rows[name].append(res)
+            print(f"| {r + 1} | {name} | " + " | ".join(f(res) for _, f in columns) + " |", flush=True)
+    print()
+    return rows
 
 
 if __name__ == "__main__":
