@@ -148,7 +148,9 @@ def test_half_conversions_match_numpy():
     out = _expanded(every_half, None)
     assert np.array_equal(out.view(np.uint32), every_half.astype(np.float32).view(np.uint32))
     assert _expanded(every_half, out) is out  # the buffer is reused
-    assert np.array_equal(_compacted(special.astype(np.float64)), special.astype(np.float16), equal_nan=True)
+    with np.errstate(over="ignore"):  # (numpy's own cast of the values past float16's range)
+        want = special.astype(np.float16)
+    assert np.array_equal(_compacted(special.astype(np.float64)), want, equal_nan=True)
 
 
 def test_anim_glb_round_trip(tmp_path):
