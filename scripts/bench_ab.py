@@ -8,8 +8,8 @@ the garment timed. Printed per run and as medians: ms per iteration (cloth, coll
 iterations, wall seconds, strain max, and a hash of the final vertices (equal hashes: the two
 checkouts computed the same drape bit for bit).
 
-With --walk SECONDS the garment is dressed (not timed) and then walks (default:female's walk
-at 1.2 m/s, 30 fps, one cycle of maps reused): realtime factor, ms per frame (maps, cloth,
+With --walk SECONDS the garment is dressed (not timed) and then walks on the body (the
+procedural walk's defaults: 1.2 m/s, 30 fps, one cycle of maps reused): realtime factor, ms per frame (maps, cloth,
 collision), penetration and strain max, and a hash of all the garment's frames. The ratio
 printed last is the median of each round's this / other (a drift between rounds cancels).
 
