@@ -9,9 +9,10 @@ iterations, wall seconds, strain max, and a hash of the final vertices (equal ha
 checkouts computed the same drape bit for bit).
 
 With --walk SECONDS the garment is dressed (not timed) and then walks on the body (the
-procedural walk's defaults: 1.2 m/s, 30 fps, one cycle of maps reused): realtime factor, ms per frame (maps, cloth,
-collision), penetration and strain max, and a hash of all the garment's frames. The ratio
-printed last is the median of each round's this / other (a drift between rounds cancels).
+procedural walk's defaults: 1.2 m/s, 30 fps, one cycle of maps reused): realtime factor, ms
+per frame (maps, cloth, collision), penetration and strain max, and a hash of all the
+garment's frames. The ratio printed last is the median of each round's this / other (a drift
+between rounds cancels).
 
     git worktree add /tmp/base <commit> && ln -s "$PWD/.venv" /tmp/base/.venv
     .venv/bin/python scripts/bench_ab.py /tmp/base [--garment dress] [--edge-cm 1.5] [--rounds 3]
