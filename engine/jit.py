@@ -1,4 +1,5 @@
-"""The decorator for serial numba kernels (imports numba only; the bottom of the engine).
+"""The decorator for serial numba kernels, and atomic array reads and writes for kernels that
+hand work between threads (imports numba only; the bottom of the engine).
 
 `serial_kernel` compiles with numba's parallel pipeline switched on, although the kernels have
 no prange and run on one thread: measured on numba 0.68 (scripts/bench_kernels.py), the same
@@ -29,3 +30,43 @@ def serial_kernel(fn=None, *, fastmath: bool = True, error_model: str = "python"
     def wrap(f):
         return njit(cache=True, fastmath=fastmath, parallel=True, error_model=error_model, nogil=True)(f)
     return wrap(fn) if fn is not None else wrap
+
+
+from numba import types as _types  # noqa: E402
+from numba.core import cgutils as _cgutils  # noqa: E402
+from numba.extending import intrinsic as _intrinsic  # noqa: E402
+
+
+def _item_pointer(context, builder, signature, args):
+    aryty = signature.args[0]
+    ary = context.make_array(aryty)(context, builder, args[0])
+    i = context.cast(builder, args[1], signature.args[1], _types.intp)
+    return _cgutils.get_item_pointer(context, builder, aryty, ary, [i], wraparound=False)
+
+
+@_intrinsic
+def atomic_load(typingctx, arr, i):
+    """atomic_load(a, i) inside a kernel: a[i] (a 1-D int64 array) read with acquire ordering --
+    read from memory every time (a plain read in a loop may be read once), and what the thread
+    that stored it wrote before is visible after. With atomic_store, two threads hand work to
+    each other through an array without the GIL (engine.collide.moving's query server)."""
+    sig = arr.dtype(arr, i)
+
+    def codegen(context, builder, signature, args):
+        return builder.load_atomic(_item_pointer(context, builder, signature, args), "acquire", 8)
+
+    return sig, codegen
+
+
+@_intrinsic
+def atomic_store(typingctx, arr, i, value):
+    """atomic_store(a, i, value) inside a kernel: a[i] = value with release ordering (everything
+    this thread wrote before is visible to a thread that atomic_loads the value)."""
+    sig = _types.void(arr, i, value)
+
+    def codegen(context, builder, signature, args):
+        value = context.cast(builder, args[2], signature.args[2], signature.args[0].dtype)
+        builder.store_atomic(value, _item_pointer(context, builder, signature, args), "release", 8)
+        return context.get_dummy_value()
+
+    return sig, codegen

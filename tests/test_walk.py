@@ -485,3 +485,67 @@ def test_collision_checks_keep_pace_with_the_body():
         bulk = float(np.linalg.norm(tr.vel.astype(np.float64).mean(axis=1), axis=1).max())
         assert got[speed] * bulk * dt <= CHECK_TRAVEL or got[speed] == 1
     assert got[1.2] == MAX_CHECK_EVERY and got[1.2] > got[2.4] > got[3.6] >= 1, got
+
+
+def test_track_collider_prefetch_answers_as_a_query_would():
+    """Points prefetched by the query server (a helper thread) for the next check's time are
+    answered there as the query at that time would answer them -- bit for bit -- and the server
+    only takes times within the frame in use; release() ends its thread."""
+    import threading
+
+    track = _sliding_box_track(1.0)
+    col, r = _collider(track)
+    ref, r2 = _collider(track)
+    # around the box's front face (z = 0.42 at t = 0.22 s, moving +z at 1 m/s): inside, in the
+    # band, just clear, clear, and beside the box
+    p0 = np.array([[0.0, 0.2, 0.4147], [0.0, 0.2, 0.4217], [0.05, 0.3, 0.4262], [0.0, 0.2, 0.45], [0.3, 0.2, 0.3]])
+    p1 = p0 + (0.0, 0.0, 0.0003)
+    try:
+        for c in (col, ref):
+            c.set_time(0.2)
+            c.query(p0)
+        assert col.prefetch(p1, 0.02)
+        assert any(t.name == "query-server" for t in threading.enumerate())
+        assert not col.prefetch(p1, 0.1)  # frame 3's time: not this frame's maps
+        col.set_time(0.22)
+        ref.set_time(0.22)
+        asked, ref_asked = col.stats["asked"], ref.stats["asked"]
+        got = [a.copy() for a in col.query(p1)]
+        want = ref.query(p1)
+        # the server asked the maps; the query itself only for the point hovering at the band's
+        # edge (a clear point that close is always asked again)
+        assert col.stats["asked"] - asked == 1 and ref.stats["asked"] - ref_asked == 5
+        assert list(want[0]) == [2, 1, 0, 0, 0], want[0]
+        for g, w in zip(got, want):
+            assert np.array_equal(g, w)
+    finally:
+        col.release()
+        ref.release()
+        r.release()
+        r2.release()
+    assert col._server is None and not any(t.name == "query-server" for t in threading.enumerate())
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
+def test_a_dead_query_server_is_an_error_not_a_hang(monkeypatch):
+    import engine.collide.moving as mv
+    from engine.errors import SimulationError
+
+    def broken(*args):
+        raise RuntimeError("broken server")
+
+    monkeypatch.setattr(mv, "_serve", broken)
+    track = _sliding_box_track(1.0)
+    col, r = _collider(track)
+    p = np.array([[0.0, 0.2, 0.402]])
+    try:
+        col.set_time(0.2)
+        col.query(p)
+        assert col.prefetch(p, 0.02)
+        col.set_time(0.22)
+        with pytest.raises(SimulationError, match="query server stopped answering"):
+            col.query(p)
+    finally:
+        col._served = None  # (nothing to stop: the thread is gone)
+        col.release()
+        r.release()

@@ -102,6 +102,7 @@ class ClothSolver:
         self.body_v = np.zeros((n, 3))
         m = n + len(model.quads) + len(model.tris)
         self.points = np.zeros((m, 3))
+        self.pre_points = np.zeros((m, 3))  # the next check's points, predicted (_prefetch)
         self.hit_buf = np.zeros(m, dtype=np.int32)  # work buffers of K.contact_rounds
         self.touched_buf = np.zeros(n, dtype=np.int32)
         self.ask_rows = np.zeros(m, dtype=np.int64)  # points to ask the collider alone (_contacts)
@@ -217,8 +218,36 @@ class ClothSolver:
                                              self.x_guard, self._saved, self._saved_list)
         t3 = time.perf_counter()
         self.timing["cloth"] += (t1 - t0) + (t3 - t2)
-        self.timing["collision"] += t2 - t1
         self.iterations += 1
+        if ahead and hasattr(self.collider, "prefetch"):
+            self._prefetch(state)
+        self.timing["collision"] += time.perf_counter() - t3 + (t2 - t1)
+
+    def _prefetch(self, state: ClothState) -> None:
+        """Right after a check: let the collider start on the next check's points, predicted
+        from here (x + v dt over the steps until then and the steps that check looks ahead), at
+        the body's time of that check -- in the background, while the steps in between run
+        (engine.collide.moving.TrackCollider.prefetch)."""
+        nxt = self._next_check(self.model.params.collide_every)
+        if nxt is None:
+            return
+        c, ahead = nxt
+        m = self.model
+        K.collision_points(state.x, state.v, self.dt * (c - self.iterations + ahead), m.quads, m.tris,
+                           self.pre_points)
+        self.collider.prefetch(self.pre_points, (c - self.iterations + 1) * self.dt)
+
+    def _next_check(self, every: float) -> tuple[int, int] | None:
+        """(iteration of the next check, how many steps ahead it will look), as _check_now will
+        have them; None if not known yet."""
+        e = float(every)
+        if e.is_integer():
+            e = int(e)
+            return -(-self.iterations // e) * e, e
+        sched = self._schedule
+        if sched is None or sched[0] != e:
+            return None
+        return sched[3], sched[1] + math.ceil((sched[2] + 1) * e - 1e-9) - sched[3]
 
     def _check_now(self, every: float) -> int:
         """Whether this step checks collisions: 0 if not, else the steps until the next check

@@ -319,10 +319,10 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
             if observer is not None:  # a viewer follows the walker: both relative to the root
                 observer("walking", x - off, drape.triangles, bv - off)
     finally:
+        if o.collision == "image":
+            collider.release()  # (its query server's thread; rendered ahead: the helper thread's renderer)
         if renderer is not None:
             renderer.release()
-        elif o.collision == "image":
-            collider.release()  # (the helper thread's renderer and context)
     wall_walk = time.perf_counter() - t_walk0 - t_pen
     sim_seconds = n_frames * frame_time
     pooled = np.concatenate(depths)  # every cloth vertex of every frame
