@@ -412,13 +412,16 @@ class TrackCollider:
             th = threading.Thread(target=_server_thread, args=(jobs,), name="query-server", daemon=True)
             th.start()
             self._server = (th, jobs)
-            # a collider dropped without release() must not leave the server spinning
-            weakref.finalize(self, _end_server, self._ctl, jobs)
+            # ends the thread: at release(), or when a collider is dropped without it
+            self._end = weakref.finalize(self, _end_server, self._ctl, jobs)
         self._ctl[RUNNING] = 1
-        self._server[1].put((self._ctl, self._par, self._pre_local, *self.maps.kernel_args(),
-                             self.c_local, self.c_time, self.c_frame, self.c_pen, self.c_un, self.c_surf,
-                             self.status, self.surface, self.depth, self.normal, self.velocity, self.map_index))
+        self._server[1].put((self._ctl, self._par, self._pre_local, *self.maps.kernel_args(), *self._carried()))
         self._served = self.maps
+
+    def _carried(self) -> tuple:
+        """_query_cached's arrays after the maps': the carried answers, then the answers."""
+        return (self.c_local, self.c_time, self.c_frame, self.c_pen, self.c_un, self.c_surf,
+                self.status, self.surface, self.depth, self.normal, self.velocity, self.map_index)
 
     def _spin(self, word: int, value: int) -> None:
         """Wait until control word `word` is `value` (the server answers within ~1 ms)."""
@@ -457,9 +460,7 @@ class TrackCollider:
         widened = self._vmax * abs(self._shift_t)
         self.stats["asked"] += _query_cached(
             self.local, t, self._k_serial, self.tol, widened, self._shift_t, self._root_v, self._vmax,
-            REACH, MAX_AGE, SLACK, NEAR, *self.maps.kernel_args(),
-            self.c_local, self.c_time, self.c_frame, self.c_pen, self.c_un, self.c_surf,
-            self.status, self.surface, self.depth, self.normal, self.velocity, self.map_index)
+            REACH, MAX_AGE, SLACK, NEAR, *self.maps.kernel_args(), *self._carried())
         self.stats["points"] += points.shape[0]
         return self.status, self.normal, self.velocity, self.depth
 
@@ -468,9 +469,10 @@ class TrackCollider:
         thread (its renderer and context)."""
         self._stop_server()
         if self._server is not None:
-            self._server[1].put(None)
+            self._end()
             self._server[0].join()
             self._server = None
+            self._ctl[STOP] = 0  # (a server started later runs)
         if self._pool is not None:
             for fut in self._pending.values():
                 fut.cancel()
