@@ -133,6 +133,18 @@ def _query_cached(local, t, frame, tol, widened, shift_t, root_v, vmax, reach, m
     return asked
 
 
+@serial_kernel
+def _to_local(points, offset, out):
+    """out = points - offset (the root's frame), (M, 3) - (3,): numpy's broadcast runs its inner
+    loop over the 3 columns, one call per row (measured: 47-78 us for the dress's 8,085 points,
+    this loop ~5)."""
+    ox, oy, oz = offset[0], offset[1], offset[2]
+    for p in range(points.shape[0]):
+        out[p, 0] = points[p, 0] - ox
+        out[p, 1] = points[p, 1] - oy
+        out[p, 2] = points[p, 2] - oz
+
+
 REQ, DONE, STOP, SERIAL, ASKED, RUNNING = range(6)  # the query server's control words (_serve)
 SERVER_WAIT = 30.0  # s: the longest wait for the query server before it is taken as dead
 
@@ -395,7 +407,7 @@ class TrackCollider:
         if self._served is not self.maps:
             self._start_server()
         shift_t = t - i / tr.fps
-        np.subtract(points, tr.offset_at(t), out=self._pre_local)
+        _to_local(points, tr.offset_at(t), self._pre_local)
         par = self._par
         par[0], par[1], par[2], par[3], par[4] = t, self.tol, self._vmax * abs(shift_t), shift_t, self._vmax
         par[5:8] = self._root_v
@@ -455,7 +467,7 @@ class TrackCollider:
         self._wait_prefetch()
         if points.shape[0] != self._n:
             self._alloc(points.shape[0])
-        np.subtract(points, self._offset, out=self.local)
+        _to_local(points, self._offset, self.local)
         t = self._t
         widened = self._vmax * abs(self._shift_t)
         self.stats["asked"] += _query_cached(
