@@ -105,3 +105,24 @@ def cycle_counter(typingctx):
         return builder.call(fn, [])
 
     return sig, codegen
+
+
+@_intrinsic
+def spin_pause(typingctx):
+    """spin_pause() inside a kernel's wait loop: the x86 PAUSE instruction (LLVM's
+    llvm.x86.sse2.pause; nothing elsewhere) -- tells the processor this is a spin-wait, so it
+    leaves more of the core to a thread sharing it and leaves the loop without a penalty."""
+    sig = _types.void()
+
+    def codegen(context, builder, signature, args):
+        import platform
+
+        from llvmlite import ir
+
+        if platform.machine().lower() in ("x86_64", "amd64", "i386", "i686"):
+            fn = _cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.VoidType(), []),
+                                                 "llvm.x86.sse2.pause")
+            builder.call(fn, [])
+        return context.get_dummy_value()
+
+    return sig, codegen

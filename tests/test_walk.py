@@ -523,7 +523,40 @@ def test_track_collider_prefetch_answers_as_a_query_would():
         ref.release()
         r.release()
         r2.release()
-    assert col._server is None and not any(t.name == "query-server" for t in threading.enumerate())
+    assert col.server._thread is None and not any(t.name == "query-server" for t in threading.enumerate())
+
+
+def test_an_idle_query_server_returns_and_starts_again():
+    """A query server left without requests for a while returns from its kernel (a collider its
+    owner forgot does not keep a core spinning); the next prefetch starts it again and is
+    answered as before."""
+    import time
+
+    from engine.collide.server import RUNNING
+
+    track = _sliding_box_track(1.0)
+    col, r = _collider(track)
+    ref, r2 = _collider(track)
+    p0 = np.array([[0.0, 0.2, 0.4147], [0.0, 0.2, 0.4217], [0.05, 0.3, 0.4262], [0.0, 0.2, 0.45]])
+    try:
+        for c in (col, ref):
+            c.set_time(0.2)
+            c.query(p0)
+        assert col.prefetch(p0, 0.01)
+        col.server.wait()
+        time.sleep(0.5)
+        assert col.server.ctl[RUNNING] == 0
+        p1 = p0 + (0.0, 0.0, 0.0003)
+        assert col.prefetch(p1, 0.02)
+        col.set_time(0.22)
+        ref.set_time(0.22)
+        for g, w in zip([a.copy() for a in col.query(p1)], ref.query(p1)):
+            assert np.array_equal(g, w)
+    finally:
+        col.release()
+        ref.release()
+        r.release()
+        r2.release()
 
 
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
@@ -546,6 +579,5 @@ def test_a_dead_query_server_is_an_error_not_a_hang(monkeypatch):
         with pytest.raises(SimulationError, match="query server stopped answering"):
             col.query(p)
     finally:
-        col._served = None  # (nothing to stop: the thread is gone)
-        col.release()
+        col.release()  # (the thread is gone: nothing to stop)
         r.release()

@@ -57,12 +57,9 @@ renders.
 from __future__ import annotations
 
 import math
-import threading
 import time
-import weakref
 
 from concurrent.futures import Future, ThreadPoolExecutor
-from queue import Queue
 
 import numpy as np
 
@@ -72,8 +69,8 @@ from engine.collide.collider import alloc_answers
 from engine.collide.gl import drop_thread_context
 from engine.collide.maps import CollisionMaps, MapRenderer
 from engine.collide.query import query_point_into
-from engine.errors import SimulationError
-from engine.jit import atomic_load, atomic_store, serial_kernel
+from engine.collide.server import DONE, IDLE, REQ, RUNNING, STOP, SpinServer
+from engine.jit import atomic_load, atomic_store, cycle_counter, serial_kernel, spin_pause
 
 REACH = 0.002  # m: a point that moved this far (in the root's frame) since its answer asks again
 MAX_AGE = 0.002  # s: ... and so does an answer this old
@@ -145,50 +142,37 @@ def _to_local(points, offset, out):
         out[p, 2] = points[p, 2] - oz
 
 
-REQ, DONE, STOP, SERIAL, ASKED, RUNNING = range(6)  # the query server's control words (_serve)
-SERVER_WAIT = 30.0  # s: the longest wait for the query server before it is taken as dead
+SERIAL, ASKED = 4, 5  # the walking query server's own control words (engine.collide.server: ctl[4:])
 
 
 @serial_kernel
 def _serve(ctl, par, local, surf, vel, has_vel, kind, side_src, geom, layout, zz,
            c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index):
-    """The query server (TrackCollider.prefetch), run by a helper thread for one frame's maps:
-    waits, spinning, for request ctl[REQ] > ctl[DONE], answers `local` with _query_cached and the
-    parameters in par (t, tol, widened, shift_t, vmax, root_v) and ctl[SERIAL], then sets
-    ctl[DONE] to the request; returns when ctl[STOP] is set and nothing is asked. It spins
-    rather than sleeps because waking a thread took ~0.25 ms here (measured), a quarter of
-    the work, and it runs without the GIL from start to return."""
+    """The query server's kernel (engine.collide.server; TrackCollider.prefetch) for one frame's
+    maps: answers each request with _query_cached and the parameters in par (t, tol, widened,
+    shift_t, vmax, root_v) and ctl[SERIAL]; returns on ctl[STOP], or after IDLE ticks without a
+    request."""
     last = ctl[DONE]
     root_v = np.empty(3)
+    atomic_store(ctl, RUNNING, 2)
+    idle_since = cycle_counter()
     while True:
         r = atomic_load(ctl, REQ)
         if r == last:
-            if atomic_load(ctl, STOP) != 0:
+            if atomic_load(ctl, STOP) != 0 or cycle_counter() - idle_since > IDLE:
                 atomic_store(ctl, RUNNING, 0)
                 return
+            spin_pause()
             continue
+        last = r
         for c in range(3):
             root_v[c] = par[5 + c]
         ctl[ASKED] += _query_cached(local, par[0], ctl[SERIAL], par[1], par[2], par[3], root_v, par[4],
                                     REACH, MAX_AGE, SLACK, NEAR, surf, vel, has_vel, kind, side_src, geom, layout,
                                     zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
                                     status, surface, penetration, normal, velocity, map_index)
-        last = r
         atomic_store(ctl, DONE, r)
-
-
-def _end_server(ctl: np.ndarray, jobs: Queue) -> None:
-    ctl[STOP] = 1
-    jobs.put(None)
-
-
-def _server_thread(jobs: Queue) -> None:
-    """The query server's thread: one _serve per frame's maps, until None."""
-    while True:
-        args = jobs.get()
-        if args is None:
-            return
-        _serve(*args)
+        idle_since = cycle_counter()
 
 
 @serial_kernel
@@ -290,13 +274,9 @@ class TrackCollider:
         self._normals_body = Body(track.body.vertices, track.body.faces)
         self._surf32 = self._vel32 = None  # the buffers a kept frame's maps are expanded into
         self._zz32 = None  # the frame in use's depth pairs (CollisionMaps.depth_pairs)
-        # the query server (prefetch): its thread and job queue, control words, parameters,
-        # the maps it serves, the last request
-        self._server: tuple[threading.Thread, Queue] | None = None
-        self._ctl = np.zeros(8, np.int64)
-        self._par = np.zeros(8)
+        # the query server (prefetch), and the arguments of its kernel while it serves a frame's maps
+        self.server = SpinServer("query-server")
         self._served = None
-        self._req = 0
 
     def _frame_maps(self, k: int) -> CollisionMaps:
         kept = self._kept.get(k)
@@ -376,6 +356,7 @@ class TrackCollider:
         self.version += 1  # every step: the body moves
 
     def _alloc(self, n: int) -> None:
+        self._stop_server()
         alloc_answers(self, n)
         self.local = np.zeros((n, 3))
         self._pre_local = np.zeros((n, 3))  # the points prefetch asks for
@@ -403,68 +384,36 @@ class TrackCollider:
         i = int(round(max(t, 0.0) * tr.fps))
         if tr.index(i)[0] != self._k:
             return False
-        self._wait_prefetch()
-        if self._served is not self.maps:
-            self._start_server()
+        sv = self.server
+        sv.wait()
+        if self._served is None:  # (stopped at every change of maps, set_time, and of arrays, _alloc)
+            self._served = (sv.par, self._pre_local, *self.maps.kernel_args(), *self._carried())
+        if not sv.running_on(self._served):
+            sv.start(_serve, self._served)
         shift_t = t - i / tr.fps
         _to_local(points, tr.offset_at(t), self._pre_local)
-        par = self._par
+        par = sv.par
         par[0], par[1], par[2], par[3], par[4] = t, self.tol, self._vmax * abs(shift_t), shift_t, self._vmax
         par[5:8] = self._root_v
-        self._ctl[SERIAL] = self._k_serial
-        self._req += 1
-        self._ctl[REQ] = self._req  # (numpy's stores are in program order; the server reads this last)
+        sv.ctl[SERIAL] = self._k_serial
+        sv.request()
         return True
-
-    def _start_server(self) -> None:
-        """Start serving this frame's maps (the thread, if not yet, and its _serve)."""
-        self._stop_server()
-        if self._server is None:
-            jobs: Queue = Queue()
-            th = threading.Thread(target=_server_thread, args=(jobs,), name="query-server", daemon=True)
-            th.start()
-            self._server = (th, jobs)
-            # ends the thread: at release(), or when a collider is dropped without it
-            self._end = weakref.finalize(self, _end_server, self._ctl, jobs)
-        self._ctl[RUNNING] = 1
-        self._server[1].put((self._ctl, self._par, self._pre_local, *self.maps.kernel_args(), *self._carried()))
-        self._served = self.maps
 
     def _carried(self) -> tuple:
         """_query_cached's arrays after the maps': the carried answers, then the answers."""
         return (self.c_local, self.c_time, self.c_frame, self.c_pen, self.c_un, self.c_surf,
                 self.status, self.surface, self.depth, self.normal, self.velocity, self.map_index)
 
-    def _spin(self, word: int, value: int) -> None:
-        """Wait until control word `word` is `value` (the server answers within ~1 ms)."""
-        ctl = self._ctl
-        if ctl[word] == value:
-            return
-        deadline = time.perf_counter() + SERVER_WAIT
-        n = 0
-        while ctl[word] != value:
-            n += 1
-            if n % 4096 == 0 and (not self._server[0].is_alive() or time.perf_counter() > deadline):
-                raise SimulationError("the collision query server stopped answering (its thread "
-                                      f"{'ended' if not self._server[0].is_alive() else 'is stuck'}); "
-                                      "this is a bug -- please report it")
-
-    def _wait_prefetch(self) -> None:
-        if self._served is not None:
-            self._spin(DONE, self._req)
-
     def _stop_server(self) -> None:
-        if self._served is not None:
-            self._wait_prefetch()
-            self._ctl[STOP] = 1
-            self._spin(RUNNING, 0)
-            self._ctl[STOP] = 0
-            self._served = None
-            self.stats["asked"] += int(self._ctl[ASKED])
-            self._ctl[ASKED] = 0
+        """Stop serving this frame's maps (its answers are in the carried arrays)."""
+        sv = self.server
+        sv.stop()
+        self._served = None
+        self.stats["asked"] += int(sv.ctl[ASKED])
+        sv.ctl[ASKED] = 0
 
     def query(self, points: np.ndarray):
-        self._wait_prefetch()
+        self.server.wait()
         if points.shape[0] != self._n:
             self._alloc(points.shape[0])
         _to_local(points, self._offset, self.local)
@@ -480,11 +429,7 @@ class TrackCollider:
         """Let go of the kept maps; end the query server's thread; with ahead, end the helper
         thread (its renderer and context)."""
         self._stop_server()
-        if self._server is not None:
-            self._end()
-            self._server[0].join()
-            self._server = None
-            self._ctl[STOP] = 0  # (a server started later runs)
+        self.server.close()
         if self._pool is not None:
             for fut in self._pending.values():
                 fut.cancel()
