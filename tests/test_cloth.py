@@ -12,7 +12,7 @@ import pytest
 
 from engine.cloth import kernels as K
 from engine.cloth.fabrics import FABRICS, get_fabric
-from engine.cloth.helper import StepHelper
+from engine.cloth.helper import StepHelper, force_split
 from engine.cloth.model import (FLEXION, MASS_FLOOR, MASS_SCALE_PERCENTILE, SHEAR, STRUCTURAL, ClothParams, ClothState, build_model,
                                lumped_mass, weld_model, with_stiffness)
 from engine.cloth.solver import GRAVITY, ClothSolver, FireRelaxer
@@ -1117,9 +1117,11 @@ def test_force_pass_with_the_step_helper_is_the_same_bit_for_bit():
     g, m = _catalogue_dress_model()
     rng = np.random.default_rng(5)
     solver = ClothSolver(m)
-    if solver.helper is None:
-        solver.helper = StepHelper()  # (a one-core machine, or switched off: start one anyway)
     r = m.runs
+    if solver.helper is None:  # (a one-core machine, or switched off: start one anyway)
+        solver.helper = StepHelper()
+        solver._split = force_split(r)
+    assert solver._split[0] < r.r_fast and solver._split[2] < len(r.runs)  # part B is not empty
     solver._start_helper()
     deadline = time.monotonic() + 120  # (its first call may compile the kernel)
     while solver.helper.ctl[K.H_RUNNING] != 2 and time.monotonic() < deadline:

@@ -4,8 +4,10 @@ The force pass (engine.cloth.kernels.eval_forces_and_integrate) cuts the springs
 and posts part B through a few control words; the helper's kernel (K.force_helper) spins on
 them without the GIL, claims part B and computes it while the solver's thread computes part A.
 Part B has its own sums, added afterwards, and whichever thread claims it first computes it: the
-result is the same bit for bit with or without a helper, and the solver never waits for one
-that is busy, descheduled or not started (it then does part B itself).
+result is the same bit for bit whichever thread did it, and the solver never waits for a helper
+that is busy, descheduled or not started (it then does part B itself). A solver without a
+helper sums all springs in one pass (part B empty): in another order, so its results differ
+from a helper's in the last bits.
 
 Why a spinning kernel: waking a sleeping thread took ~0.25 ms here (median; the walking query
 server measured it, engine.collide.moving), longer than the part. The kernel returns after
@@ -45,8 +47,10 @@ def helper_wanted() -> bool:
 def force_split(runs, share: float = HELPER_SHARE) -> np.ndarray:
     """(4,) int64: where the force pass cuts each group (engine.cloth.model.SpringRuns) into
     parts A and B -- the fast group's runs and single springs, then the slow group's -- so that
-    part B holds about `share` of each group's springs."""
+    part B holds about `share` of each group's springs (0: none)."""
     def cut(r_lo: int, r_hi: int, s_lo: int, s_hi: int) -> tuple[int, int]:
+        if share <= 0.0:
+            return r_hi, s_hi
         lens = runs.runs[r_lo:r_hi, 3]
         total = int(lens.sum())
         keep = np.cumsum(lens)

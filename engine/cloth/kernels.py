@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from engine.jit import atomic_cas, atomic_load, atomic_store, cycle_counter, serial_kernel
+from engine.jit import atomic_cas, atomic_load, atomic_store, cycle_counter, serial_kernel, spin_pause
 
 VM_ZERO, VM_AVERAGE, VM_DIRECTIONAL, VM_PROVOT = 0, 1, 2, 3
 MAX_PUSH = 1.0  # m/s: fastest a collision response moves a point out of the body
@@ -198,6 +198,7 @@ def force_helper(hctl, soa, sp, perm, runs, split, r_fast, n_fast, sprops, tmp_b
             if atomic_load(hctl, H_STOP) != 0 or cycle_counter() - idle_since > HELPER_IDLE:
                 atomic_store(hctl, H_RUNNING, 0)
                 return
+            spin_pause()
             continue
         last = r
         if atomic_cas(hctl, H_CLAIM, r - 1, r) == r - 1:
@@ -249,8 +250,9 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
     parts (split (4,): the fast group's runs [0, split[0]) and single springs [n_run, split[1])
     are part A, the rest part B; split[2], split[3] cut the slow group the same way). This thread
     does part A into the forces; part B goes into its own sums (acc_b, and f_slow_b for the slow
-    group), which are added afterwards. With `helper` the parts are posted through the control
-    words hctl (H_*) to the helper's kernel (force_helper), which runs on the other core; part B
+    group), which are added afterwards (an empty part B, without a helper: nothing is added).
+    With `helper` the parts are posted through the control words hctl (H_*) to the helper's
+    kernel (force_helper), which runs on the other core; part B
     is claimed (atomic_cas) by whichever thread comes to it first -- this one when the helper is
     busy, descheduled or gone -- so the sums, and the result, are the same bit for bit either
     way, and this thread never waits for a helper that did not start. Measured on a captured
@@ -282,6 +284,7 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
         fz[i] = mass[i] * gravity[2] - damping * mass[i] * vz[i] + sz[i]
     n_act = _runs_part(soa, sp, perm, runs, 0, split[0], n_run, split[1], sprops, tmp, lengths, listed, geo_s,
                        soa[6:9])
+    helper_sums = True
     if helper:
         if atomic_cas(hctl, H_CLAIM, req - 1, req) == req - 1:  # the helper has not started on it: do it here
             n_act += _part_b(soa, sp, perm, runs, split, r_fast, n_fast, sprops, tmp, lengths, listed, geo_s,
@@ -291,16 +294,20 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
             while atomic_load(hctl, H_DONE) != req:
                 if cycle_counter() - t0 > HELPER_WAIT:
                     return -1
+                spin_pause()
             n_act += hctl[H_NB]
-    else:
+    elif split[0] < r_fast or split[1] < n_fast or split[2] < runs.shape[0] or split[3] < sp.shape[0]:
         n_act += _part_b(soa, sp, perm, runs, split, r_fast, n_fast, sprops, tmp, lengths, listed, geo_s,
                          acc_b, f_slow_b, slow_due)
-    bx, by, bz = acc_b[0], acc_b[1], acc_b[2]
-    ux, uy, uz = f_slow_b[0], f_slow_b[1], f_slow_b[2]
-    for i in range(n):
-        fx[i] += bx[i] + ux[i]
-        fy[i] += by[i] + uy[i]
-        fz[i] += bz[i] + uz[i]
+    else:  # part B is empty (no helper): the sums are complete
+        helper_sums = False
+    if helper_sums:
+        bx, by, bz = acc_b[0], acc_b[1], acc_b[2]
+        ux, uy, uz = f_slow_b[0], f_slow_b[1], f_slow_b[2]
+        for i in range(n):
+            fx[i] += bx[i] + ux[i]
+            fy[i] += by[i] + uy[i]
+            fz[i] += bz[i] + uz[i]
     # the list in the model's spring order (the velocity modification's Gauss-Seidel order)
     n_list = 0
     if n_act:

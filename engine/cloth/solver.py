@@ -21,7 +21,7 @@ from typing import Protocol
 import numpy as np
 
 from engine.cloth import kernels as K
-from engine.cloth.helper import StepHelper, force_split, helper_wanted
+from engine.cloth.helper import HELPER_SHARE, StepHelper, force_split, helper_wanted
 from engine.cloth.model import FLEXION, ClothModel, ClothState
 from engine.cloth.welds import pull_seams
 from engine.errors import InputError, SimulationError
@@ -92,13 +92,14 @@ class ClothSolver:
         self._soa = np.zeros((9, n))
         self._f_slow = np.zeros((3, n))  # the flexion springs' forces, as last evaluated (flexion_every)
         self._run_tmp = np.zeros((3, r.longest))
-        # the force pass's part B (engine.cloth.helper): where the groups are cut, its sums, the
-        # helper's run buffer; the helper thread unless the machine or the collider rules it out
-        self._split = force_split(r)
+        # the force pass's part B (engine.cloth.helper): the helper thread unless the machine or
+        # the collider rules it out; where the groups are cut (without a helper part B is empty:
+        # the sums are those of one pass over all springs), its sums, the helper's run buffer
+        self.helper = StepHelper() if helper_wanted() and not hasattr(collider, "prefetch") else None
+        self._split = force_split(r, HELPER_SHARE if self.helper is not None else 0.0)
         self._acc_b = np.zeros((3, n))
         self._f_slow_b = np.zeros((3, n))
         self._tmp_b = np.zeros((3, r.longest))
-        self.helper = StepHelper() if helper_wanted() and not hasattr(collider, "prefetch") else None
         self._helper_args = None
         self._no_ctl = np.zeros(8, np.int64)
         self._lengths = np.zeros(len(model.springs))
