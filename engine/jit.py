@@ -73,24 +73,6 @@ def atomic_store(typingctx, arr, i, value):
 
 
 @_intrinsic
-def atomic_cas(typingctx, arr, i, expected, new):
-    """atomic_cas(a, i, expected, new) inside a kernel: if a[i] == expected, a[i] = new, in one
-    step no other thread can come between; returns what a[i] was (== expected: this thread
-    made the change). Acquire and release ordering. Two threads that both want a piece of work
-    claim it this way: exactly one of them gets it (engine.cloth.kernels' force pass)."""
-    sig = arr.dtype(arr, i, expected, new)
-
-    def codegen(context, builder, signature, args):
-        ty = signature.args[0].dtype
-        old = builder.cmpxchg(_item_pointer(context, builder, signature, args),
-                              context.cast(builder, args[2], signature.args[2], ty),
-                              context.cast(builder, args[3], signature.args[3], ty), "acq_rel", "acquire")
-        return builder.extract_value(old, 0)
-
-    return sig, codegen
-
-
-@_intrinsic
 def cycle_counter(typingctx):
     """cycle_counter() inside a kernel: the processor's time-stamp counter (int64 ticks at a fixed
     rate, ~3e9 a second here; LLVM's readcyclecounter) -- a clock for a spinning kernel to give

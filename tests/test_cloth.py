@@ -4,7 +4,6 @@ velocity modification kernel, seam welding helpers and fabrics."""
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import replace
 
 import numpy as np
@@ -12,7 +11,6 @@ import pytest
 
 from engine.cloth import kernels as K
 from engine.cloth.fabrics import FABRICS, get_fabric
-from engine.cloth.helper import StepHelper, force_split
 from engine.cloth.model import (FLEXION, MASS_FLOOR, MASS_SCALE_PERCENTILE, SHEAR, STRUCTURAL, ClothParams, ClothState, build_model,
                                lumped_mass, weld_model, with_stiffness)
 from engine.cloth.solver import GRAVITY, ClothSolver, FireRelaxer
@@ -871,17 +869,11 @@ def test_force_pass_matches_a_direct_sum():
     dt, damping, mu = 1e-4, 0.02, 0.4
     v_after = v.copy()
     r = m.runs
-
-    def force_pass(x, v, slow_due, helper=False):
-        hctl = solver._start_helper() if helper else solver._no_ctl
-        return K.eval_forces_and_integrate(x, v, m.inv_mass, m.mass, r.springs, r.perm, r.runs, r.n_run,
-                                           solver._sprops, GRAVITY, damping, solver.contact, solver.contact_n, mu,
-                                           dt, solver.f, solver.vm_work, solver.vm_geo, solver._soa, solver._run_tmp,
-                                           solver._lengths, solver._listed, solver._listed_words,
-                                           solver._geo_s, r.r_fast, r.n_fast, r.n_run_slow, slow_due, solver._f_slow,
-                                           solver._split, solver._acc_b, solver._f_slow_b, hctl, helper)
-
-    n_over = force_pass(x, v_after, True)
+    n_over = K.eval_forces_and_integrate(x, v_after, m.inv_mass, m.mass, r.springs, r.perm, r.runs, r.n_run,
+                                         solver._sprops, GRAVITY, damping, solver.contact, solver.contact_n, mu,
+                                         dt, solver.f, solver.vm_work, solver.vm_geo, solver._soa, solver._run_tmp,
+                                         solver._lengths, solver._listed, solver._listed_words,
+                                         solver._geo_s, r.r_fast, r.n_fast, r.n_run_slow, True, solver._f_slow)
     a, b = m.springs[:, 0], m.springs[:, 1]
     d = x[b] - x[a]
     length = np.linalg.norm(d, axis=1)
@@ -912,7 +904,11 @@ def test_force_pass_matches_a_direct_sum():
     x2 = x + rng.normal(0, 0.002, x.shape)
     solver.contact[:] = False
     v2 = v.copy()
-    force_pass(x2, v2, False)
+    K.eval_forces_and_integrate(x2, v2, m.inv_mass, m.mass, r.springs, r.perm, r.runs, r.n_run,
+                                solver._sprops, GRAVITY, damping, solver.contact, solver.contact_n, mu,
+                                dt, solver.f, solver.vm_work, solver.vm_geo, solver._soa, solver._run_tmp,
+                                solver._lengths, solver._listed, solver._listed_words,
+                                solver._geo_s, r.r_fast, r.n_fast, r.n_run_slow, False, solver._f_slow)
     flex = m.kind == FLEXION
     xs = np.where(flex[:, None], x[b] - x[a], x2[b] - x2[a])  # each spring's vector where it was evaluated
     ls = np.linalg.norm(xs, axis=1)
@@ -1107,49 +1103,3 @@ def test_drape_progress_follows_the_drift_down_to_rest():
     f = [_settle_fraction(d, 0.005) for d in drifts]
     assert f[0] == 0.0 and f[1] == 0.0 and f[-1] == 1.0 and f[-2] == 1.0
     assert all(a <= b for a, b in zip(f, f[1:])) and 0.0 < f[3] < 1.0
-
-
-def test_force_pass_with_the_step_helper_is_the_same_bit_for_bit():
-    """The force pass with its part B done by the step helper thread (engine.cloth.helper) gives
-    the same forces, velocities and listed springs as without it, bit for bit, on steps with and
-    without the slow group; the helper took part B at least once (it is not just the solver's
-    thread doing everything), and closing the solver ends its thread."""
-    g, m = _catalogue_dress_model()
-    rng = np.random.default_rng(5)
-    solver = ClothSolver(m)
-    r = m.runs
-    if solver.helper is None:  # (a one-core machine, or switched off: start one anyway)
-        solver.helper = StepHelper()
-        solver._split = force_split(r)
-    assert solver._split[0] < r.r_fast and solver._split[2] < len(r.runs)  # part B is not empty
-    solver._start_helper()
-    deadline = time.monotonic() + 120  # (its first call may compile the kernel)
-    while solver.helper.ctl[K.H_RUNNING] != 2 and time.monotonic() < deadline:
-        time.sleep(0.01)
-    took = 0
-    for it in range(40):
-        x = g.positions + rng.normal(0, 0.003, g.positions.shape)
-        v = rng.normal(0, 0.1, x.shape)
-        out = []
-        for helper in (False, True):
-            vv = v.copy()
-            hctl = solver._start_helper() if helper else solver._no_ctl
-            done = hctl[K.H_DONE]
-            n_over = K.eval_forces_and_integrate(x, vv, m.inv_mass, m.mass, r.springs, r.perm, r.runs, r.n_run,
-                                                 solver._sprops, GRAVITY, 0.02, solver.contact, solver.contact_n,
-                                                 0.4, 1e-4, solver.f, solver.vm_work, solver.vm_geo, solver._soa,
-                                                 solver._run_tmp, solver._lengths, solver._listed,
-                                                 solver._listed_words, solver._geo_s, r.r_fast, r.n_fast,
-                                                 r.n_run_slow, it % 4 == 0, solver._f_slow, solver._split,
-                                                 solver._acc_b, solver._f_slow_b, hctl, helper)
-            if helper:
-                took += int(hctl[K.H_DONE] != done)
-            out.append((vv, solver.f.copy(), solver.vm_work[:n_over].copy(), solver.vm_geo[:n_over].copy()))
-        for a, b in zip(*out):
-            assert np.array_equal(a, b)
-        assert len(out[0][2]) > 0
-    assert took > 0
-    th = solver.helper._thread
-    solver.close()
-    th.join(5)
-    assert not th.is_alive()

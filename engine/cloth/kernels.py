@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from engine.jit import atomic_cas, atomic_load, atomic_store, cycle_counter, serial_kernel, spin_pause
+from engine.jit import serial_kernel
 
 VM_ZERO, VM_AVERAGE, VM_DIRECTIONAL, VM_PROVOT = 0, 1, 2, 3
 MAX_PUSH = 1.0  # m/s: fastest a collision response moves a point out of the body
@@ -79,139 +79,10 @@ def _single_spring(s, sp, xs, ys, zs, vx, vy, vz, rest, k, spring_c, fx, fy, fz)
     return length, dx, dy, dz
 
 
-@njit(fastmath=True, cache=True, inline="always")
-def _runs_part(soa, sp, perm, runs, r_lo, r_hi, s_lo, s_hi, sprops, tmp, lengths, listed, geo_s, acc):
-    """The spring runs r_lo..r_hi and the single springs s_lo..s_hi (positions in the force
-    pass's order) added to acc (3, N), the springs past their listing length marked (see
-    eval_forces_and_integrate); returns how many."""
-    xs, ys, zs = soa[0], soa[1], soa[2]
-    vx, vy, vz = soa[3], soa[4], soa[5]
-    fx, fy, fz = acc[0], acc[1], acc[2]
-    rest, k, spring_c, limits = sprops[0], sprops[1], sprops[2], sprops[3]
-    tx, ty, tz = tmp[0], tmp[1], tmp[2]
-    n_act = 0
-    for r in range(r_lo, r_hi):
-        s0, a0, b0, m = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3]
-        xa, ya, za = xs[a0:a0 + m], ys[a0:a0 + m], zs[a0:a0 + m]
-        xb, yb, zb = xs[b0:b0 + m], ys[b0:b0 + m], zs[b0:b0 + m]
-        ua, wa, qa = vx[a0:a0 + m], vy[a0:a0 + m], vz[a0:a0 + m]
-        ub, wb, qb = vx[b0:b0 + m], vy[b0:b0 + m], vz[b0:b0 + m]
-        r_, k_, c_, lim_, l_ = rest[s0:s0 + m], k[s0:s0 + m], spring_c[s0:s0 + m], limits[s0:s0 + m], lengths[s0:s0 + m]
-        over = 0
-        for t in range(m):
-            dx = xb[t] - xa[t]
-            dy = yb[t] - ya[t]
-            dz = zb[t] - za[t]
-            c, length = _axial(dx, dy, dz, ub[t] - ua[t], wb[t] - wa[t], qb[t] - qa[t], r_[t], k_[t], c_[t])
-            tx[t] = c * dx
-            ty[t] = c * dy
-            tz[t] = c * dz
-            l_[t] = length
-            over += length > lim_[t]
-        if over:
-            for s in range(s0, s0 + m):
-                if lengths[s] > limits[s]:
-                    a = sp[s, 0]
-                    b = sp[s, 1]
-                    listed[perm[s]] = 1
-                    _store_geo(geo_s, perm[s], xs[b] - xs[a], ys[b] - ys[a], zs[b] - zs[a], lengths[s], limits[s])
-                    n_act += 1
-        _scatter_run(fx, fy, fz, tx, ty, tz, a0, b0, m)
-    for s in range(s_lo, s_hi):
-        length, dx, dy, dz = _single_spring(s, sp, xs, ys, zs, vx, vy, vz, rest, k, spring_c, fx, fy, fz)
-        if length > 1e-12 and length > limits[s]:
-            listed[perm[s]] = 1
-            _store_geo(geo_s, perm[s], dx, dy, dz, length, limits[s])
-            n_act += 1
-    return n_act
-
-
-@njit(fastmath=True, cache=True, inline="always")
-def _slow_part(soa, sp, runs, r_lo, r_hi, s_lo, s_hi, sprops, tmp, acc):
-    """The slow group's runs r_lo..r_hi and single springs s_lo..s_hi added to acc (3, N)
-    (flexion springs: never listed)."""
-    xs, ys, zs = soa[0], soa[1], soa[2]
-    vx, vy, vz = soa[3], soa[4], soa[5]
-    rest, k, spring_c = sprops[0], sprops[1], sprops[2]
-    tx, ty, tz = tmp[0], tmp[1], tmp[2]
-    for r in range(r_lo, r_hi):
-        s0, a0, b0, m = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3]
-        xa, ya, za = xs[a0:a0 + m], ys[a0:a0 + m], zs[a0:a0 + m]
-        xb, yb, zb = xs[b0:b0 + m], ys[b0:b0 + m], zs[b0:b0 + m]
-        ua, wa, qa = vx[a0:a0 + m], vy[a0:a0 + m], vz[a0:a0 + m]
-        ub, wb, qb = vx[b0:b0 + m], vy[b0:b0 + m], vz[b0:b0 + m]
-        r_, k_, c_ = rest[s0:s0 + m], k[s0:s0 + m], spring_c[s0:s0 + m]
-        for t in range(m):
-            dx = xb[t] - xa[t]
-            dy = yb[t] - ya[t]
-            dz = zb[t] - za[t]
-            c, _ = _axial(dx, dy, dz, ub[t] - ua[t], wb[t] - wa[t], qb[t] - qa[t], r_[t], k_[t], c_[t])
-            tx[t] = c * dx
-            ty[t] = c * dy
-            tz[t] = c * dz
-        _scatter_run(acc[0], acc[1], acc[2], tx, ty, tz, a0, b0, m)
-    for s in range(s_lo, s_hi):
-        _single_spring(s, sp, xs, ys, zs, vx, vy, vz, rest, k, spring_c, acc[0], acc[1], acc[2])
-
-
-@njit(fastmath=True, cache=True, inline="always")
-def _zero3(a):
-    for c in range(3):
-        for i in range(a.shape[1]):
-            a[c, i] = 0.0
-
-
-@njit(fastmath=True, cache=True, inline="always")
-def _part_b(soa, sp, perm, runs, split, r_fast, n_fast, sprops, tmp, lengths, listed, geo_s, acc_b, f_slow_b,
-            slow_due):
-    """Part B of the force pass (eval_forces_and_integrate): into acc_b (zeroed first), and on a
-    step the slow group is due, its part into f_slow_b (zeroed first). Returns the listed count."""
-    _zero3(acc_b)
-    if slow_due:
-        _zero3(f_slow_b)
-        _slow_part(soa, sp, runs, split[2], runs.shape[0], split[3], sp.shape[0], sprops, tmp, f_slow_b)
-    return _runs_part(soa, sp, perm, runs, split[0], r_fast, split[1], n_fast, sprops, tmp, lengths, listed, geo_s,
-                      acc_b)
-
-
-# the step helper's control words (hctl): a request's serial, the last one claimed and the last
-# one done, whether the slow group is due, part B's listed count, stop, running
-H_REQ, H_CLAIM, H_DONE, H_SLOW, H_NB, H_STOP, H_RUNNING = range(7)
-HELPER_WAIT = 3 * 10 ** 10  # cycles (~10 s): the longest the force pass waits for a part the helper claimed
-HELPER_IDLE = 3 * 10 ** 8  # cycles (~0.1 s) without a request after which the helper's kernel returns
-
-
-@serial_kernel(error_model="numpy")
-def force_helper(hctl, soa, sp, perm, runs, split, r_fast, n_fast, sprops, tmp_b, lengths, listed, geo_s, acc_b,
-                 f_slow_b):
-    """The step helper's kernel (engine.cloth.solver.StepHelper), run by a helper thread without
-    the GIL: spins until a force pass posts a request (hctl[H_REQ] goes up), claims its part B
-    (unless the force pass claimed it first), computes it (_part_b) and says so in hctl[H_DONE].
-    Returns when hctl[H_STOP] is set, or after HELPER_IDLE cycles without a request (a solver
-    that stopped stepping; its next step starts the kernel again)."""
-    atomic_store(hctl, H_RUNNING, 2)  # (1: started, 2: spinning)
-    last = atomic_load(hctl, H_REQ)
-    idle_since = cycle_counter()
-    while True:
-        r = atomic_load(hctl, H_REQ)
-        if r == last:
-            if atomic_load(hctl, H_STOP) != 0 or cycle_counter() - idle_since > HELPER_IDLE:
-                atomic_store(hctl, H_RUNNING, 0)
-                return
-            spin_pause()
-            continue
-        last = r
-        if atomic_cas(hctl, H_CLAIM, r - 1, r) == r - 1:
-            hctl[H_NB] = _part_b(soa, sp, perm, runs, split, r_fast, n_fast, sprops, tmp_b, lengths, listed, geo_s,
-                                 acc_b, f_slow_b, hctl[H_SLOW] != 0)
-            atomic_store(hctl, H_DONE, r)
-        idle_since = cycle_counter()
-
-
 @serial_kernel(error_model="numpy")
 def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprops, gravity, damping,
                               contact, contact_n, mu, dt, f_out, work, geo, soa, tmp, lengths, listed, listed_words,
-                              geo_s, r_fast, n_fast, n_run_slow, slow_due, f_slow, split, acc_b, f_slow_b, hctl, helper):
+                              geo_s, r_fast, n_fast, n_run_slow, slow_due, f_slow):
     """Springs (eq. 2) with damping along each spring, gravity, viscous damping, then the
     reaction force of seed 000 eq. 16 where the vertex touched the body in the previous step
     (cancel the force into the body, Coulomb friction on the tangential part), then the velocity
@@ -244,21 +115,7 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
     made in the model's order -- the order the velocity modification goes through them
     (measured: listed in the runs' order instead, the drapes changed enough for default:female's
     M dress at 3 cm to end 6.05 % stretched, reported tight, where it ended at 5.93 % before;
-    in model order 5.94 %, in as many iterations as before).
-
-    Two threads (the step helper, engine.cloth.solver.StepHelper): the springs are cut in two
-    parts (split (4,): the fast group's runs [0, split[0]) and single springs [n_run, split[1])
-    are part A, the rest part B; split[2], split[3] cut the slow group the same way). This thread
-    does part A into the forces; part B goes into its own sums (acc_b, and f_slow_b for the slow
-    group), which are added afterwards (an empty part B, without a helper: nothing is added).
-    With `helper` the parts are posted through the control words hctl (H_*) to the helper's
-    kernel (force_helper), which runs on the other core; part B
-    is claimed (atomic_cas) by whichever thread comes to it first -- this one when the helper is
-    busy, descheduled or gone -- so the sums, and the result, are the same bit for bit either
-    way, and this thread never waits for a helper that did not start. Measured on a captured
-    walking step of the dress (3,879 vertices, 14.9k fast springs): the fast group 127 us on one
-    thread, 80 us with the helper. Returns -1 if the helper claimed part B and did not finish it
-    within HELPER_WAIT cycles (a bug), else the number of listed springs."""
+    in model order 5.94 %, in as many iterations as before)."""
     n = x.shape[0]
     xs, ys, zs = soa[0], soa[1], soa[2]
     vx, vy, vz = soa[3], soa[4], soa[5]
@@ -270,44 +127,70 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
         vx[i] = v[i, 0]
         vy[i] = v[i, 1]
         vz[i] = v[i, 2]
-    req = hctl[H_REQ] + 1
-    if helper:  # part B to the helper (the positions above are visible to it once it sees req)
-        hctl[H_SLOW] = 1 if slow_due else 0
-        atomic_store(hctl, H_REQ, req)
+    rest, k, spring_c, limits = sprops[0], sprops[1], sprops[2], sprops[3]
+    tx, ty, tz = tmp[0], tmp[1], tmp[2]
     sx, sy, sz = f_slow[0], f_slow[1], f_slow[2]
     if slow_due:
-        _zero3(f_slow)
-        _slow_part(soa, sp, runs, r_fast, split[2], n_fast + n_run_slow, split[3], sprops, tmp, f_slow)
+        for i in range(n):
+            sx[i] = 0.0
+            sy[i] = 0.0
+            sz[i] = 0.0
+        for r in range(r_fast, runs.shape[0]):
+            s0, a0, b0, m = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3]
+            xa, ya, za = xs[a0:a0 + m], ys[a0:a0 + m], zs[a0:a0 + m]
+            xb, yb, zb = xs[b0:b0 + m], ys[b0:b0 + m], zs[b0:b0 + m]
+            ua, wa, qa = vx[a0:a0 + m], vy[a0:a0 + m], vz[a0:a0 + m]
+            ub, wb, qb = vx[b0:b0 + m], vy[b0:b0 + m], vz[b0:b0 + m]
+            r_, k_, c_ = rest[s0:s0 + m], k[s0:s0 + m], spring_c[s0:s0 + m]
+            for t in range(m):
+                dx = xb[t] - xa[t]
+                dy = yb[t] - ya[t]
+                dz = zb[t] - za[t]
+                c, _ = _axial(dx, dy, dz, ub[t] - ua[t], wb[t] - wa[t], qb[t] - qa[t], r_[t], k_[t], c_[t])
+                tx[t] = c * dx
+                ty[t] = c * dy
+                tz[t] = c * dz
+            _scatter_run(sx, sy, sz, tx, ty, tz, a0, b0, m)
+        for s in range(n_fast + n_run_slow, sp.shape[0]):
+            _single_spring(s, sp, xs, ys, zs, vx, vy, vz, rest, k, spring_c, sx, sy, sz)
     for i in range(n):
         fx[i] = mass[i] * gravity[0] - damping * mass[i] * vx[i] + sx[i]
         fy[i] = mass[i] * gravity[1] - damping * mass[i] * vy[i] + sy[i]
         fz[i] = mass[i] * gravity[2] - damping * mass[i] * vz[i] + sz[i]
-    n_act = _runs_part(soa, sp, perm, runs, 0, split[0], n_run, split[1], sprops, tmp, lengths, listed, geo_s,
-                       soa[6:9])
-    helper_sums = True
-    if helper:
-        if atomic_cas(hctl, H_CLAIM, req - 1, req) == req - 1:  # the helper has not started on it: do it here
-            n_act += _part_b(soa, sp, perm, runs, split, r_fast, n_fast, sprops, tmp, lengths, listed, geo_s,
-                             acc_b, f_slow_b, slow_due)
-        else:
-            t0 = cycle_counter()
-            while atomic_load(hctl, H_DONE) != req:
-                if cycle_counter() - t0 > HELPER_WAIT:
-                    return -1
-                spin_pause()
-            n_act += hctl[H_NB]
-    elif split[0] < r_fast or split[1] < n_fast or split[2] < runs.shape[0] or split[3] < sp.shape[0]:
-        n_act += _part_b(soa, sp, perm, runs, split, r_fast, n_fast, sprops, tmp, lengths, listed, geo_s,
-                         acc_b, f_slow_b, slow_due)
-    else:  # part B is empty (no helper): the sums are complete
-        helper_sums = False
-    if helper_sums:
-        bx, by, bz = acc_b[0], acc_b[1], acc_b[2]
-        ux, uy, uz = f_slow_b[0], f_slow_b[1], f_slow_b[2]
-        for i in range(n):
-            fx[i] += bx[i] + ux[i]
-            fy[i] += by[i] + uy[i]
-            fz[i] += bz[i] + uz[i]
+    n_act = 0
+    for r in range(r_fast):
+        s0, a0, b0, m = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3]
+        xa, ya, za = xs[a0:a0 + m], ys[a0:a0 + m], zs[a0:a0 + m]
+        xb, yb, zb = xs[b0:b0 + m], ys[b0:b0 + m], zs[b0:b0 + m]
+        ua, wa, qa = vx[a0:a0 + m], vy[a0:a0 + m], vz[a0:a0 + m]
+        ub, wb, qb = vx[b0:b0 + m], vy[b0:b0 + m], vz[b0:b0 + m]
+        r_, k_, c_, lim_, l_ = rest[s0:s0 + m], k[s0:s0 + m], spring_c[s0:s0 + m], limits[s0:s0 + m], lengths[s0:s0 + m]
+        over = 0
+        for t in range(m):
+            dx = xb[t] - xa[t]
+            dy = yb[t] - ya[t]
+            dz = zb[t] - za[t]
+            c, length = _axial(dx, dy, dz, ub[t] - ua[t], wb[t] - wa[t], qb[t] - qa[t], r_[t], k_[t], c_[t])
+            tx[t] = c * dx
+            ty[t] = c * dy
+            tz[t] = c * dz
+            l_[t] = length
+            over += length > lim_[t]
+        if over:
+            for s in range(s0, s0 + m):
+                if lengths[s] > limits[s]:
+                    a = sp[s, 0]
+                    b = sp[s, 1]
+                    listed[perm[s]] = 1
+                    _store_geo(geo_s, perm[s], xs[b] - xs[a], ys[b] - ys[a], zs[b] - zs[a], lengths[s], limits[s])
+                    n_act += 1
+        _scatter_run(fx, fy, fz, tx, ty, tz, a0, b0, m)
+    for s in range(n_run, n_fast):
+        length, dx, dy, dz = _single_spring(s, sp, xs, ys, zs, vx, vy, vz, rest, k, spring_c, fx, fy, fz)
+        if length > 1e-12 and length > limits[s]:
+            listed[perm[s]] = 1
+            _store_geo(geo_s, perm[s], dx, dy, dz, length, limits[s])
+            n_act += 1
     # the list in the model's spring order (the velocity modification's Gauss-Seidel order)
     n_list = 0
     if n_act:

@@ -21,10 +21,9 @@ from typing import Protocol
 import numpy as np
 
 from engine.cloth import kernels as K
-from engine.cloth.helper import HELPER_SHARE, StepHelper, force_split, helper_wanted
 from engine.cloth.model import FLEXION, ClothModel, ClothState
 from engine.cloth.welds import pull_seams
-from engine.errors import InputError, SimulationError
+from engine.errors import InputError
 
 GRAVITY = np.array([0.0, -9.81, 0.0])
 
@@ -92,16 +91,6 @@ class ClothSolver:
         self._soa = np.zeros((9, n))
         self._f_slow = np.zeros((3, n))  # the flexion springs' forces, as last evaluated (flexion_every)
         self._run_tmp = np.zeros((3, r.longest))
-        # the force pass's part B (engine.cloth.helper): the helper thread unless the machine or
-        # the collider rules it out; where the groups are cut (without a helper part B is empty:
-        # the sums are those of one pass over all springs), its sums, the helper's run buffer
-        self.helper = StepHelper() if helper_wanted() and not hasattr(collider, "prefetch") else None
-        self._split = force_split(r, HELPER_SHARE if self.helper is not None else 0.0)
-        self._acc_b = np.zeros((3, n))
-        self._f_slow_b = np.zeros((3, n))
-        self._tmp_b = np.zeros((3, r.longest))
-        self._helper_args = None
-        self._no_ctl = np.zeros(8, np.int64)
         self._lengths = np.zeros(len(model.springs))
         self._listed = np.zeros(-(-len(model.springs) // 8) * 8, dtype=np.uint8)
         self._listed_words = self._listed.view(np.uint64)
@@ -164,22 +153,6 @@ class ClothSolver:
         self.model, self.dt = model, float(dt)
         self._sprops = self._spring_props(model)
         self._guard_lim2 = (None, None)
-        self._helper_args = None  # (the helper's kernel starts again on the new stiffness)
-
-    def close(self) -> None:
-        """End the step helper's thread (a dropped solver's ends by itself)."""
-        if self.helper is not None:
-            self.helper.close()
-            self.helper = None
-
-    def _start_helper(self) -> np.ndarray:
-        """The helper's control words, its kernel running on this solver's arrays."""
-        if self._helper_args is None:
-            r = self.model.runs
-            self._helper_args = (self._soa, r.springs, r.perm, r.runs, self._split, r.r_fast, r.n_fast, self._sprops,
-                                 self._tmp_b, self._lengths, self._listed, self._geo_s, self._acc_b, self._f_slow_b)
-        self.helper.start(self._helper_args)
-        return self.helper.ctl
 
     def step(self, state: ClothState, gravity_scale: float = 1.0, damping_scale: float = 1.0,
              friction_scale: float = 1.0) -> None:
@@ -190,18 +163,13 @@ class ClothSolver:
         # forces (eq. 2, gravity, damping, reaction eq. 16) and v += dt a (eq. 3); the same pass
         # lists the over-elongated springs for the velocity modification
         r = m.runs
-        hctl = self._start_helper() if self.helper is not None else self._no_ctl
         n_over = K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, r.springs, r.perm, r.runs, r.n_run,
                                              self._sprops, g, p.damping * damping_scale,
                                              self.contact, self.contact_n, m.fabric.friction * friction_scale, dt,
                                              self.f, self.vm_work, self.vm_geo,
                                              self._soa, self._run_tmp, self._lengths, self._listed, self._listed_words,
                                              self._geo_s, r.r_fast, r.n_fast, r.n_run_slow,
-                                             self.iterations % p.flexion_every == 0, self._f_slow,
-                                             self._split, self._acc_b, self._f_slow_b, hctl, self.helper is not None)
-        if n_over < 0:
-            raise SimulationError("the step helper thread stopped answering; this is a bug -- please report it "
-                                  "(TRYON_STEP_HELPER=0 runs without it)")
+                                             self.iterations % p.flexion_every == 0, self._f_slow)
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 §3)
         n_act = K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
                                     self.mode, g, dt, self.body_v, p.vm_passes,
