@@ -30,9 +30,9 @@ band is not asked again at every check.
 
 The query server (`prefetch`): right after a collision check the solver predicts where its
 points will be at the next check, and a helper thread answers them for that time while the cloth
-steps on; the next check's query then finds most answers fresh. The thread (engine.collide.
-server.SpinServer) runs one nogil kernel per frame's maps (_serve) that spins between requests,
-handed over through atomic control words -- no GIL, no sleeping: a pool thread woken per request started ~0.25 ms late
+steps on; the next check's query then finds most answers fresh. The thread
+(engine.collide.server.SpinServer) runs one nogil kernel per frame's maps (_serve) that spins
+between requests, handed over through atomic control words -- no GIL, no sleeping: a pool thread woken per request started ~0.25 ms late
 (median; 0.7 ms at the 90th percentile) and took the GIL twice a request, and the cloth steps
 slowed by more than the query saved (measured; a worker process with shared memory spent as
 long handing requests over). Measured, scripts/bench_ab.py --walk 4 on the 3,883-vertex dress,
