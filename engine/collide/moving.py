@@ -32,8 +32,9 @@ The query server (`prefetch`): right after a collision check the solver predicts
 points will be at the next check, and a helper thread answers them for that time while the cloth
 steps on; the next check's query then finds most answers fresh. The thread
 (engine.collide.server.SpinServer) runs one nogil kernel per frame's maps (_serve) that spins
-between requests, handed over through atomic control words -- no GIL, no sleeping: a pool thread woken per request started ~0.25 ms late
-(median; 0.7 ms at the 90th percentile) and took the GIL twice a request, and the cloth steps
+between requests, handed over through atomic control words -- no GIL, no sleeping: a pool
+thread woken per request started ~0.25 ms late (median; 0.7 ms at the 90th percentile) and
+took the GIL twice a request, and the cloth steps
 slowed by more than the query saved (measured; a worker process with shared memory spent as
 long handing requests over). Measured, scripts/bench_ab.py --walk 4 on the 3,883-vertex dress,
 six interleaved rounds: 79-98 instead of 101-128 ms a frame in five, worse in one (134 against
@@ -134,7 +135,7 @@ def _query_cached(local, t, frame, tol, widened, shift_t, root_v, vmax, reach, m
 def _to_local(points, offset, out):
     """out = points - offset (the root's frame), (M, 3) - (3,): numpy's broadcast runs its inner
     loop over the 3 columns, one call per row (measured: 47-78 us for the dress's 8,085 points,
-    this loop ~5)."""
+    this loop ~9)."""
     ox, oy, oz = offset[0], offset[1], offset[2]
     for p in range(points.shape[0]):
         out[p, 0] = points[p, 0] - ox
