@@ -22,7 +22,7 @@ its own total sits on a lucky draw (measured 2026-12-03 at 2 cm: 21.5k iteration
 (five garments on default:female and default:male in M, and the sample skirt on the sample
 scan) at --edge-cm with the start positions moved by 1 nm at random (round k: seed k), in
 both checkouts: total iterations, wall seconds, unsettled drapes, the largest strain and the
-most sharp folds; then the mean totals and their ratio.
+most sharp folds, the largest penetration (max and p99); then the mean totals and their ratio.
 
     git worktree add /tmp/base <commit> && ln -s "$PWD/.venv" /tmp/base/.venv
     .venv/bin/python scripts/bench_ab.py /tmp/base [--garment dress] [--edge-cm 1.5] [--rounds 3]
@@ -99,7 +99,7 @@ T.build_garment = moved
 cases = [(b, g) for b in ("default:female", "default:male")
          for g in ("dress", "shirt", "trousers", "skirt", "sleeveless-shirt")] + [(sys.argv[7], None)]
 total = wall = unsettled = 0
-strain = folds = 0.0
+strain = folds = pen = p99 = 0.0
 bodies = {}
 for b, g in cases:
     body = bodies.get(b) or resolve_body(b)
@@ -115,7 +115,10 @@ for b, g in cases:
     unsettled += not rep["settled"]
     strain = max(strain, rep["strain"]["max"])
     folds = max(folds, rep["sharp_folds"]["count"])
-print(json.dumps({"iterations": total, "wall": wall, "unsettled": unsettled, "strain": strain, "folds": folds}))
+    pen = max(pen, rep["penetration_mm"]["max"])
+    p99 = max(p99, rep["penetration_mm"]["p99"])
+print(json.dumps({"iterations": total, "wall": wall, "unsettled": unsettled, "strain": strain, "folds": folds,
+                  "pen": pen, "p99": p99}))
 """
 SAMPLES = HERE.parent / "shared" / "samples" / "garmentcode"
 
@@ -203,7 +206,8 @@ def settle_ab(roots: dict[str, Path], args) -> None:
     rows = run_rounds(roots, args, [
         ("iterations", lambda r: f"{r['iterations']}"), ("wall s", lambda r: f"{r['wall']:.1f}"),
         ("unsettled", lambda r: f"{r['unsettled']}"), ("strain max %", lambda r: f"{100 * r['strain']:.2f}"),
-        ("sharp folds max", lambda r: f"{r['folds']}")])
+        ("sharp folds max", lambda r: f"{r['folds']}"), ("pen. max mm", lambda r: f"{r['pen']:.1f}"),
+        ("pen. p99 max mm", lambda r: f"{r['p99']:.1f}")])
     mean = {k: statistics.mean(x["iterations"] for x in rs) for k, rs in rows.items()}
     for k, rs in rows.items():
         its = [x["iterations"] for x in rs]
