@@ -126,6 +126,44 @@ def test_track_collider_reuses_maps_of_a_periodic_track():
         r.release()
 
 
+def test_kept_maps_expanded_ahead_are_the_frames_maps():
+    """Rendered ahead in a helper thread, a periodic track's kept frames are expanded (float32
+    maps and depth pairs) into the spare buffers while the present frame is in use: at every
+    switch -- in order, and after jumps the expansion ahead did not foresee -- the maps in use
+    are the frame's own, and each frame's maps are the frame's whether expanded ahead or now."""
+    from engine.collide.maps import MapRenderer
+    from engine.collide.moving import TrackCollider
+
+    track = _sliding_box_track(0.5, frames=4)
+    track.cycle_start, track.cycle_frames = 1, 3
+    col = TrackCollider(track, lambda: MapRenderer(track.body.faces, texel=0.005, tol=0.005, window=(0.0, 0.5),
+                                                   with_velocity=True, own_context=True), tol=0.005, ahead=True)
+    ref, r = _collider(track)  # renders every frame in this thread, keeps nothing expanded
+    try:
+        order = list(range(12)) + [2, 9, 9, 4, 1, 7]
+        reused = 0
+        for i in order:
+            before = col.stats["renders"]
+            col.set_time(i / track.fps)
+            ref.set_time(i / track.fps)
+            col.query(np.zeros((1, 3)))
+            k = col._k
+            assert k == ref._k and col.maps is col._kept[k][0]
+            # a frame just rendered is used as rendered; a reused one from its float16 copy
+            fresh = col.stats["renders"] > before
+            reused += not fresh
+            for a, b in ((col.maps.surf, ref.maps.surf), (col.maps.vel, ref.maps.vel),
+                         (col.maps.depth_pairs, ref.maps.depth_pairs)):
+                want = b if fresh else b.astype(np.float16).astype(np.float32)
+                assert np.array_equal(a, want, equal_nan=True), (i, k)
+        assert col.stats["renders"] == 4 and reused == 14
+        assert col._prepared is not None  # (the next frame's expansion was on its way)
+    finally:
+        col.release()
+        r.release()
+    assert col._prepared is None
+
+
 def test_half_conversions_match_numpy():
     """The kept maps' float16 copies (moving._compacted) and their expansion (moving._expanded)
     give numpy's astype bit for bit: random values over the half's whole range (subnormals,

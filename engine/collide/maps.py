@@ -43,7 +43,7 @@ SEGMENT_GROWTH_RINGS = 0  # rings a segment map reaches into its neighbours; 3 c
 # crease (7.7 mm penetration) but let the arm maps push shoulder straps off while sewing: off
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _depth_pairs(surf, layout, zz):
     """zz[r, c] = (front z, back z) for every front-block pixel (CollisionMaps.depth_pairs)."""
     for m in range(layout.shape[0]):
@@ -114,6 +114,11 @@ class CollisionMaps:
             _depth_pairs(self.surf, self.layout, zz)
             self.__dict__["_zz"], self.__dict__["_zz_of"] = zz, self.surf
         return zz
+
+    @property
+    def depth_pairs_ready(self) -> bool:
+        """Whether depth_pairs are made for the present surf (asking for them costs nothing)."""
+        return self.__dict__.get("_zz") is not None and self.__dict__.get("_zz_of") is self.surf
 
     def surf_changed(self, buffer: np.ndarray | None = None) -> None:
         """Say that surf was rewritten in place (or dropped): depth_pairs are made again when

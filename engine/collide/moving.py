@@ -47,8 +47,10 @@ they are late.
 Map reuse (DESIGN: a periodic walk renders one cycle): maps are kept per distinct track frame
 (the ramp, then one cycle), rendered on first use; `stats` counts renders and reuses. Kept maps
 hold their float arrays in float16 when `compact` is set (half the memory; the depth error at
-2 m is 1 mm, under the 5 mm texel), expanded to float32 when their frame comes up (into the
-same two buffers each time). Both conversions are numba kernels (_compact_half, _expand_half),
+2 m is 1 mm, under the 5 mm texel), expanded to float32 for their frame (into one of two buffer
+sets: rendered ahead, the helper thread expands the next frame's, with its depth pairs, into
+the set not in use while the solver works on this frame; the switch only waits for it, or
+expands now after a jump). Both conversions are numba kernels (_compact_half, _expand_half),
 bit for bit what numpy's astype gives: measured on the walking dress's maps (1.4 million values
 a frame), numpy took 8 ms to compact and 13-14 ms to expand a frame -- 1.4 s of a 4 s walk's
 23 s -- the kernels 3 and 0.7 ms. `stats["map_seconds"]` counts the conversions with the
@@ -273,8 +275,14 @@ class TrackCollider:
         self.stats = {"renders": 0, "reuses": 0, "map_seconds": 0.0, "map_bytes": 0, "asked": 0, "points": 0,
                       "render_seconds": 0.0}
         self._normals_body = Body(track.body.vertices, track.body.faces)
-        self._surf32 = self._vel32 = None  # the buffers a kept frame's maps are expanded into
-        self._zz32 = None  # the frame in use's depth pairs (CollisionMaps.depth_pairs)
+        # A kept frame's maps are expanded into one of two buffer sets (float32 surf, vel, and
+        # their depth pairs): the set of the frame in use (_use), and the other, into which the
+        # helper thread expands the next frame's while the solver works on this one (_prepared:
+        # (frame, future)) -- the frame switch then only waits for it (_frame_maps)
+        self._sets: list[list] = [[None, None, None], [None, None, None]]
+        self._use = 0
+        self._prepared: tuple[int, Future] | None = None
+        self._zz32 = None  # a rendered frame's depth pairs (CollisionMaps.depth_pairs)
         # the query server (prefetch), and the arguments of its kernel while it serves a frame's maps
         self.server = SpinServer("query-server")
         self._served = None
@@ -284,11 +292,20 @@ class TrackCollider:
         t0 = time.perf_counter()
         if kept is not None:
             self.stats["reuses"] += 1
-            maps, surf, vel = kept
-            if self.compact:  # into the same two buffers every frame (one frame's maps are in use)
-                maps.surf = self._surf32 = _expanded(surf, self._surf32)
-                maps.vel = self._vel32 = _expanded(vel, self._vel32)
+            maps = kept[0]
+            if self.compact:  # into the buffer set not in use (expanded ahead, or now)
+                spare = 1 - self._use
+                prep, self._prepared = self._prepared, None
+                if prep is not None:
+                    prep[1].result()  # (it writes into the spare set: wait for it either way)
+                    if prep[0] != k:  # expanded for another frame (the track jumped)
+                        self._let_go(prep[0])
+                        prep = None
+                if prep is None:
+                    self._fill(k, spare)
+                self._use = spare
                 self.stats["map_seconds"] += time.perf_counter() - t0
+                return maps
             return self._with_depth_pairs(maps)
         if self._pool is not None:  # rendered ahead (or now, in the helper thread)
             fut = self._pending.pop(k, None) or self._pool.submit(self._render, k)
@@ -316,7 +333,33 @@ class TrackCollider:
         if self.keep:
             kept = (maps, _compacted(maps.surf), _compacted(maps.vel)) if self.compact else \
                 (maps, maps.surf, maps.vel)
+        else:  # (dropped with the maps; rendered ahead, they are made in the helper thread)
+            maps.depth_pairs  # noqa: B018
         return maps, kept, time.perf_counter() - t0
+
+    def _fill(self, k: int, j: int) -> None:
+        """Frame k's kept float16 maps expanded into buffer set j, with their depth pairs (in
+        the helper thread ahead of time, or in this one at the frame switch)."""
+        maps, surf, vel = self._kept[k]
+        b = self._sets[j]
+        maps.surf = b[0] = _expanded(surf, b[0])
+        maps.vel = b[1] = _expanded(vel, b[1])
+        if b[2] is None or b[2].shape[:2] != maps.surf.shape[:2]:
+            b[2] = np.zeros(maps.surf.shape[:2] + (2,), np.float32)
+        maps.surf_changed(b[2])
+        maps.depth_pairs  # noqa: B018 (made now, into b[2])
+
+    def _let_go(self, k: int) -> None:
+        """A kept frame's maps let go of their float32 buffers (they keep the float16 copies)."""
+        maps = self._kept[k][0]
+        maps.surf_changed()
+        maps.surf = maps.vel = None
+
+    def _prepare_ahead(self, i: int) -> None:
+        """Start expanding the maps of frame i, if kept, into the spare buffer set."""
+        k, _ = self.track.index(i)
+        if self.compact and k != self._k and k in self._kept and i <= self.last_frame:
+            self._prepared = (k, self._pool.submit(self._fill, k, 1 - self._use))
 
     def _render_ahead(self, i: int) -> None:
         """Start rendering the maps of frame i (if neither kept nor on their way)."""
@@ -326,7 +369,9 @@ class TrackCollider:
 
     def _with_depth_pairs(self, maps: CollisionMaps) -> CollisionMaps:
         """The frame's depth pairs go into one buffer for all frames (one frame's maps are in use;
-        kept frames keep none)."""
+        kept frames keep none) -- unless made with the maps (_render, maps not kept)."""
+        if maps.depth_pairs_ready:
+            return maps
         if self._zz32 is None or self._zz32.shape[:2] != maps.surf.shape[:2]:
             self._zz32 = np.zeros(maps.surf.shape[:2] + (2,), np.float32)
         maps.surf_changed(self._zz32)
@@ -347,6 +392,7 @@ class TrackCollider:
             self._k = k
             if self._pool is not None:
                 self._render_ahead(i + 1)
+                self._prepare_ahead(i + 1)
             self._root_v = tr.root_velocity(i)
             rel = tr.vel[k].astype(np.float64) - self._root_v
             self._vmax = float(np.sqrt(np.einsum("ij,ij->i", rel, rel).max()))
@@ -435,6 +481,9 @@ class TrackCollider:
             for fut in self._pending.values():
                 fut.cancel()
             self._pending.clear()
+            if self._prepared is not None:
+                self._prepared[1].cancel()
+                self._prepared = None
             self._pool.submit(self._end_thread).result()
             self._pool.shutdown(wait=True)
             self._pool = None
