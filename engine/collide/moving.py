@@ -299,7 +299,7 @@ class TrackCollider:
                 if prep is not None:
                     prep[1].result()  # (it writes into the spare set: wait for it either way)
                     if prep[0] != k:  # expanded for another frame (the track jumped)
-                        self._let_go(prep[0])
+                        self._let_go(self._kept[prep[0]][0])
                         prep = None
                 if prep is None:
                     self._fill(k, spare)
@@ -344,14 +344,12 @@ class TrackCollider:
         b = self._sets[j]
         maps.surf = b[0] = _expanded(surf, b[0])
         maps.vel = b[1] = _expanded(vel, b[1])
-        if b[2] is None or b[2].shape[:2] != maps.surf.shape[:2]:
-            b[2] = np.zeros(maps.surf.shape[:2] + (2,), np.float32)
         maps.surf_changed(b[2])
-        maps.depth_pairs  # noqa: B018 (made now, into b[2])
+        b[2] = maps.depth_pairs  # made now (into b[2] when it has the shape)
 
-    def _let_go(self, k: int) -> None:
-        """A kept frame's maps let go of their float32 buffers (they keep the float16 copies)."""
-        maps = self._kept[k][0]
+    @staticmethod
+    def _let_go(maps: CollisionMaps) -> None:
+        """Kept (compact) maps let go of their float32 buffers (they keep the float16 copies)."""
         maps.surf_changed()
         maps.surf = maps.vel = None
 
@@ -384,10 +382,11 @@ class TrackCollider:
         k, _ = tr.index(i)
         if k != self._k:
             self._stop_server()  # (it reads this frame's maps)
-            if self.maps is not None:
-                self.maps.surf_changed()  # (the shared depth-pair buffer goes to the next frame)
+            if self.maps is not None:  # (its depth-pair buffer goes to another frame)
                 if self.compact:
-                    self.maps.surf = self.maps.vel = None  # the float16 copies are kept
+                    self._let_go(self.maps)
+                else:
+                    self.maps.surf_changed()
             self.maps = self._frame_maps(k)
             self._k = k
             if self._pool is not None:

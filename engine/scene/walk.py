@@ -88,7 +88,8 @@ class WalkOptions:
     # walking default: every 6 steps instead of 4 saved 12-18 ms a frame but let the trousers
     # reach 6.8 mm (4.2) and 30 % strain (21.8), the shirt 4.1 mm (1.4): left at CHECK_TRAVEL
     collide_every: int | None = None
-    # Alternations of strain limit and collision response per check (the drape also uses 2: ClothParams.contact_rounds).
+    # Alternations of strain limit and collision response per check (the drape also uses 2:
+    # ClothParams.contact_rounds).
     # Measured on the dress, 4 s: 4 rounds 195 ms a frame, penetration max 3.0 mm, strain
     # 7.3 %; 2 rounds 152 ms, 3.4 mm, 7.3 %; 1 round 140 ms, 3.8 mm, 7.7 %.
     contact_rounds: int = 2
