@@ -73,6 +73,38 @@ def atomic_store(typingctx, arr, i, value):
 
 
 @_intrinsic
+def atomic_add(typingctx, arr, i, value):
+    """atomic_add(a, i, value) inside a kernel: a[i] += value as one indivisible step (acquire
+    and release ordering); returns the value a[i] had before. Two threads counting into the
+    same word lose no count (engine.collide.moving: chunks of a shared query finished)."""
+    sig = arr.dtype(arr, i, value)
+
+    def codegen(context, builder, signature, args):
+        value = context.cast(builder, args[2], signature.args[2], signature.args[0].dtype)
+        return builder.atomic_rmw("add", _item_pointer(context, builder, signature, args), value, "acq_rel")
+
+    return sig, codegen
+
+
+@_intrinsic
+def atomic_cas(typingctx, arr, i, expected, value):
+    """atomic_cas(a, i, expected, value) inside a kernel: if a[i] == expected, a[i] = value, as
+    one indivisible step (acquire and release ordering); returns whether it did. Of two
+    threads claiming the same word's next value, exactly one succeeds (engine.collide.moving:
+    chunks of a shared query claimed)."""
+    sig = _types.boolean(arr, i, expected, value)
+
+    def codegen(context, builder, signature, args):
+        ty = signature.args[0].dtype
+        exp = context.cast(builder, args[2], signature.args[2], ty)
+        value = context.cast(builder, args[3], signature.args[3], ty)
+        pair = builder.cmpxchg(_item_pointer(context, builder, signature, args), exp, value, "acq_rel", "acquire")
+        return builder.extract_value(pair, 1)
+
+    return sig, codegen
+
+
+@_intrinsic
 def cycle_counter(typingctx):
     """cycle_counter() inside a kernel: the processor's time-stamp counter (int64 ticks at a fixed
     rate, ~3e9 a second here; LLVM's readcyclecounter) -- a clock for a spinning kernel to give

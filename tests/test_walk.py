@@ -547,12 +547,11 @@ def test_track_collider_prefetch_answers_as_a_query_would():
         assert not col.prefetch(p1, 0.1)  # frame 3's time: not this frame's maps
         col.set_time(0.22)
         ref.set_time(0.22)
-        asked, ref_asked = col.stats["asked"], ref.stats["asked"]
         got = [a.copy() for a in col.query(p1)]
         want = ref.query(p1)
-        # the server asked the maps; the query itself only for the point hovering at the band's
-        # edge (a clear point that close is always asked again)
-        assert col.stats["asked"] - asked == 1 and ref.stats["asked"] - ref_asked == 5
+        # the prefetch asked the maps; the query itself only for the point hovering at the
+        # band's edge (a clear point that close is always asked again)
+        assert col.last_asked == 1 and ref.last_asked == 5
         assert list(want[0]) == [2, 1, 0, 0, 0], want[0]
         for g, w in zip(got, want):
             assert np.array_equal(g, w)
@@ -599,7 +598,11 @@ def test_an_idle_query_server_returns_and_starts_again():
 
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
 def test_a_dead_query_server_is_an_error_not_a_hang(monkeypatch):
+    """A query server whose thread died before taking part answers nothing: the solver's thread
+    answers every chunk itself, the same answers. One that died holding a chunk of a query is
+    an error once the wait for it ends -- not a hang, not a half answer."""
     import engine.collide.moving as mv
+    from engine.collide.server import REQ
     from engine.errors import SimulationError
 
     def broken(*args):
@@ -608,14 +611,71 @@ def test_a_dead_query_server_is_an_error_not_a_hang(monkeypatch):
     monkeypatch.setattr(mv, "_serve", broken)
     track = _sliding_box_track(1.0)
     col, r = _collider(track)
-    p = np.array([[0.0, 0.2, 0.402]])
+    ref, r2 = _collider(track)
+    p = np.array([[0.0, 0.2, 0.402], [0.0, 0.2, 0.43]])
     try:
-        col.set_time(0.2)
-        col.query(p)
+        for c in (col, ref):
+            c.set_time(0.2)
+            c.query(p)
         assert col.prefetch(p, 0.02)
         col.set_time(0.22)
+        ref.set_time(0.22)
+        for g, w in zip([a.copy() for a in col.query(p)], ref.query(p)):
+            assert np.array_equal(g, w)
+        # a request with its only chunk claimed (by a thread that then died) and not finished
+        col._post(1, col._t, col._shift_t)
+        ctl = col.server.ctl
+        ctl[mv.NEXT] = (int(ctl[REQ]) << 32) | 1
+        col.help_wait = 3 * 10 ** 8  # ~0.1 s
         with pytest.raises(SimulationError, match="query server stopped answering"):
-            col.query(p)
+            col._finish()
     finally:
+        col._posted = False
         col.release()  # (the thread is gone: nothing to stop)
+        ref.release()
         r.release()
+        r2.release()
+
+
+def test_queries_shared_with_the_server_answer_as_one_thread_does():
+    """The query server's thread and the solver's take chunks of each query (and of each
+    prefetch) as they come: whichever thread answers a chunk, the answers and the carried
+    answers are the ones a collider answering alone gives, bit for bit -- over several chunks
+    of points round a moving box, queried and prefetched over a few frames."""
+    import engine.collide.moving as mv
+    from engine.collide.maps import MapRenderer
+    from engine.collide.moving import TrackCollider
+
+    track = _sliding_box_track(1.0)
+    rng = np.random.default_rng(3)
+    n = 5 * mv.CHUNK + 17
+    p = np.array([0.0, 0.25, 0.42]) + rng.uniform(-1.0, 1.0, (n, 3)) * (0.25, 0.25, 0.03)
+    cols, rens = [], []
+    for helper in (True, False):
+        rens.append(MapRenderer(track.body.faces, texel=0.005, tol=0.005, window=(0.0, 0.5), with_velocity=True))
+        cols.append(TrackCollider(track, rens[-1], tol=0.005, helper=helper))
+    try:
+        for step in range(40):
+            t = 0.2 + step * 0.002
+            x = p + (0.0, 0.0, 0.9 * (t - 0.2)) + rng.normal(0.0, 0.0002, p.shape)
+            answers = []
+            for c in cols:
+                c.set_time(t)
+                answers.append([a.copy() for a in c.query(x)] + [c.last_asked])
+            for g, w in zip(*answers):
+                assert np.array_equal(g, w)
+            for name in ("c_local", "c_time", "c_frame", "c_pen", "c_un", "c_surf"):
+                assert np.array_equal(getattr(cols[0], name), getattr(cols[1], name)), name
+            if step % 2 == 0:
+                for c in cols:
+                    c.prefetch(x + (0.0, 0.0, 0.0018), 0.002)
+        # both threads answered chunks; with helper False no thread was started
+        assert cols[0].server.ctl[mv.SERVER_CHUNKS] > 0 and cols[0].server.ctl[mv.SOLVER_CHUNKS] > 0
+        assert cols[1].server._thread is None and cols[1].server.ctl[mv.SERVER_CHUNKS] == 0
+        assert cols[0].stats["asked"] == cols[1].stats["asked"] > 0
+        assert np.any(answers[0][0] == 2) and np.any(answers[0][0] == 0)
+    finally:
+        for c in cols:
+            c.release()
+        for r in rens:
+            r.release()

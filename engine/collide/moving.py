@@ -39,6 +39,18 @@ slowed by more than the query saved (measured; a worker process with shared memo
 long handing requests over). Measured, scripts/bench_ab.py --walk 4 on the 3,883-vertex dress,
 six interleaved rounds: 79-98 instead of 101-128 ms a frame in five, worse in one (134 against
 114, in a slow period of the machine).
+Every request -- the prefetch, and the check's own query of the points where they are -- is
+answered in chunks of CHUNK points that either thread claims (_work): the server starts on a
+request at once, and the solver's thread, when it needs the answers, takes the chunks not yet
+claimed instead of waiting (_help), then waits only for the chunks the server holds. A point's
+answer depends on its own rows alone, so the answers are the same bit for bit whoever answers
+which chunk (tests/test_walk.py). Measured on the walking dress (4374 vertices, 2 s): waiting for
+the server had cost 5.8-10.7 ms a frame -- 8 % of its prefetches were not even begun by the
+next check, the server's thread descheduled by this shared machine -- and the first query
+after each frame switch (every point asked again) 1.9 ms; the server now starts on a frame's
+maps at the switch, and answers ~70 % of the chunks. scripts/bench_ab.py --walk 4, four
+interleaved rounds: collision 15.8 instead of 21.3 ms a frame, 0.88 x the time a frame, the same
+frames bit for bit.
 
 Rendered ahead (`ahead`): a helper thread with its own GL context (engine.collide.gl.thread_context)
 renders frame k + 1's maps as soon as frame k's come into use; set_time waits for them only if
@@ -73,7 +85,8 @@ from engine.collide.gl import drop_thread_context
 from engine.collide.maps import CollisionMaps, MapRenderer
 from engine.collide.query import query_point_into
 from engine.collide.server import DONE, IDLE, REQ, RUNNING, STOP, SpinServer
-from engine.jit import atomic_load, atomic_store, cycle_counter, serial_kernel, spin_pause
+from engine.errors import SimulationError
+from engine.jit import atomic_add, atomic_cas, atomic_load, atomic_store, cycle_counter, serial_kernel, spin_pause
 
 REACH = 0.002  # m: a point that moved this far (in the root's frame) since its answer asks again
 MAX_AGE = 0.002  # s: ... and so does an answer this old
@@ -83,11 +96,12 @@ MIN_NZ = 0.2  # a carried penetration changes at most 1 / MIN_NZ x the normal mo
 
 
 @serial_kernel
-def _query_cached(local, t, frame, tol, widened, shift_t, root_v, vmax, reach, max_age, slack, near,
+def _query_cached(local, lo, hi, t, frame, tol, widened, shift_t, root_v, vmax, reach, max_age, slack, near,
                   surf, vel, has_vel, kind, side_src, geom, layout, zz,
                   c_local, c_time, c_frame, c_pen, c_un, c_surf,
                   status, surface, penetration, normal, velocity, map_index):
-    """Answer every point, asking the maps only where the last answer may be stale: the maps
+    """Answer the points lo .. hi - 1 (each on its own: a point's answer and carried answer are
+    its rows alone), asking the maps only where the last answer may be stale: the maps
     changed, the point moved `reach` (root frame), the answer is `max_age` old, or -- for a point
     the maps found no surface near (further than `near` outside the widened band) -- the point
     and the surface (at most vmax relative to the root) may together have closed its distance to
@@ -98,7 +112,7 @@ def _query_cached(local, t, frame, tol, widened, shift_t, root_v, vmax, reach, m
     positive. An answer may be for a later time than t (prefetched: TrackCollider.prefetch).
     Returns how many points were asked."""
     asked = 0
-    for p in range(local.shape[0]):
+    for p in range(lo, hi):
         x, y, z = local[p, 0], local[p, 1], local[p, 2]
         dx, dy, dz = x - c_local[p, 0], y - c_local[p, 1], z - c_local[p, 2]
         moved = np.sqrt(dx * dx + dy * dy + dz * dz)
@@ -145,18 +159,72 @@ def _to_local(points, offset, out):
         out[p, 2] = points[p, 2] - oz
 
 
-SERIAL, ASKED = 4, 5  # the walking query server's own control words (engine.collide.server: ctl[4:])
+# the walking query server's own control words (engine.collide.server: ctl[4:]): the maps'
+# serial, points the request asked the maps for, the next chunk to claim (the request's number
+# << 32 | chunk), chunks finished, chunks in the request, which points it asks (0: predicted,
+# 1: this step's); chunks the server's thread answered, and the solver's thread (running counts)
+SERIAL, ASKED, NEXT, FINISHED, N_CHUNKS, WHICH, SERVER_CHUNKS, SOLVER_CHUNKS = 4, 5, 6, 7, 8, 9, 10, 11
+CHUNK = 512  # points a claim takes
+HELP_WAIT = 3 * 10 ** 10  # time-stamp counter ticks (~10 s): a chunk not finished by then is lost
 
 
 @serial_kernel
-def _serve(ctl, par, local, surf, vel, has_vel, kind, side_src, geom, layout, zz,
-           c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index):
-    """The query server's kernel (engine.collide.server; TrackCollider.prefetch) for one frame's
-    maps: answers each request with _query_cached and the parameters in par (t, tol, widened,
-    shift_t, vmax, root_v) and ctl[SERIAL]; returns on ctl[STOP], or after IDLE ticks without a
-    request."""
-    last = ctl[DONE]
+def _work(ctl, r, tally, par, pre_local, local, surf, vel, has_vel, kind, side_src, geom, layout, zz,
+          c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index):
+    """Answer chunks of request r (_query_cached with the parameters in par: t, tol, widened,
+    shift_t, vmax, root_v; ctl[SERIAL]; the points pre_local or local, ctl[WHICH]) until none is
+    left to claim; returns the points asked. Either thread may run it at any time: a chunk is
+    claimed by swapping ctl[NEXT] from (r, c) to (r, c + 1), so each chunk is answered once, by
+    whichever thread claimed it, and a thread still holding an older request's number claims
+    nothing (TrackCollider._post writes NEXT first). Each chunk adds the points it asked to
+    ctl[ASKED] before it counts as finished, and one to ctl[tally] (the thread's count)."""
+    asked = 0
     root_v = np.empty(3)
+    n = local.shape[0]
+    while True:
+        w = atomic_load(ctl, NEXT)
+        c = w & 0xFFFFFFFF
+        if (w >> 32) != r or c >= ctl[N_CHUNKS]:
+            return asked
+        if not atomic_cas(ctl, NEXT, w, w + 1):
+            continue
+        for k in range(3):
+            root_v[k] = par[5 + k]
+        pts = local if ctl[WHICH] != 0 else pre_local
+        k = _query_cached(pts, c * CHUNK, min(n, (c + 1) * CHUNK), par[0], ctl[SERIAL], par[1], par[2], par[3],
+                          root_v, par[4], REACH, MAX_AGE, SLACK, NEAR, surf, vel, has_vel, kind, side_src, geom,
+                          layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
+                          status, surface, penetration, normal, velocity, map_index)
+        atomic_add(ctl, ASKED, k)
+        asked += k
+        ctl[tally] += 1
+        atomic_add(ctl, FINISHED, 1)
+
+
+@serial_kernel
+def _help(ctl, wait, par, pre_local, local, surf, vel, has_vel, kind, side_src, geom, layout, zz,
+          c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index):
+    """The solver's thread: answer what is left of the last request (_work), then wait for the
+    chunks the server holds. Returns the points this thread asked, or -1 when a chunk was not
+    finished within `wait` time-stamp counter ticks (the server's thread died holding it)."""
+    asked = _work(ctl, atomic_load(ctl, REQ), SOLVER_CHUNKS, par, pre_local, local, surf, vel, has_vel, kind, side_src, geom,
+                  layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
+                  status, surface, penetration, normal, velocity, map_index)
+    since = cycle_counter()
+    while atomic_load(ctl, FINISHED) < ctl[N_CHUNKS]:
+        if cycle_counter() - since > wait:
+            return -1
+        spin_pause()
+    return asked
+
+
+@serial_kernel
+def _serve(ctl, par, pre_local, local, surf, vel, has_vel, kind, side_src, geom, layout, zz,
+           c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index):
+    """The query server's kernel (engine.collide.server; TrackCollider._post) for one frame's
+    maps: takes chunks of each request (_work) beside the solver's thread; returns on
+    ctl[STOP], or after IDLE ticks without a request."""
+    last = ctl[DONE]
     atomic_store(ctl, RUNNING, 2)
     idle_since = cycle_counter()
     while True:
@@ -168,12 +236,8 @@ def _serve(ctl, par, local, surf, vel, has_vel, kind, side_src, geom, layout, zz
             spin_pause()
             continue
         last = r
-        for c in range(3):
-            root_v[c] = par[5 + c]
-        ctl[ASKED] += _query_cached(local, par[0], ctl[SERIAL], par[1], par[2], par[3], root_v, par[4],
-                                    REACH, MAX_AGE, SLACK, NEAR, surf, vel, has_vel, kind, side_src, geom, layout,
-                                    zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
-                                    status, surface, penetration, normal, velocity, map_index)
+        _work(ctl, r, SERVER_CHUNKS, par, pre_local, local, surf, vel, has_vel, kind, side_src, geom, layout, zz,
+              c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index)
         atomic_store(ctl, DONE, r)
         idle_since = cycle_counter()
 
@@ -249,12 +313,14 @@ class TrackCollider:
     solver_carries = False  # the body moves every step; it carries answers itself (_query_cached)
 
     def __init__(self, track: BodyTrack, renderer, tol: float, keep: bool = True,
-                 compact: bool = True, ahead: bool = False):
+                 compact: bool = True, ahead: bool = False, helper: bool = True):
         """keep: keep each frame's maps for reuse (a periodic track); compact: keep them as float16.
         ahead: render each frame's maps one frame ahead in a helper thread while the solver works
         (the body's motion does not depend on the cloth); `renderer` is then a function that makes
         the MapRenderer, called in that thread (with own_context=True: GL objects belong to the
-        context they were made in). release() ends the thread."""
+        context they were made in). release() ends the thread.
+        helper: the query server's thread takes part in the queries (module doc); False: this
+        thread answers them alone (the same answers)."""
         self.track, self.renderer, self.tol = track, (None if ahead else renderer), float(tol)
         self._make_renderer = renderer if ahead else None
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="maps") if ahead else None
@@ -285,7 +351,11 @@ class TrackCollider:
         self._zz32 = None  # a rendered frame's depth pairs (CollisionMaps.depth_pairs)
         # the query server (prefetch), and the arguments of its kernel while it serves a frame's maps
         self.server = SpinServer("query-server")
+        self.helper = helper
+        self.help_wait = HELP_WAIT
+        self.last_asked = 0
         self._served = None
+        self._posted = False  # a query request posted and not yet known to be answered (_finish)
 
     def _frame_maps(self, k: int) -> CollisionMaps:
         kept = self._kept.get(k)
@@ -396,6 +466,10 @@ class TrackCollider:
             rel = tr.vel[k].astype(np.float64) - self._root_v
             self._vmax = float(np.sqrt(np.einsum("ij,ij->i", rel, rel).max()))
             self._k_serial += 1  # answers from other maps are not carried over
+            if self.helper and self._n > 0:  # the server starts on these maps now, not at the first query
+                self._served = (self.server.par, self._pre_local, self.local, *self.maps.kernel_args(),
+                                *self._carried())
+                self.server.start(_serve, self._served)
         self._shift_t = t - i / tr.fps
         self._t = t
         self._offset = tr.offset_at(t)
@@ -430,20 +504,42 @@ class TrackCollider:
         i = int(round(max(t, 0.0) * tr.fps))
         if tr.index(i)[0] != self._k:
             return False
-        sv = self.server
-        sv.wait()
-        if self._served is None:  # (stopped at every change of maps, set_time, and of arrays, _alloc)
-            self._served = (sv.par, self._pre_local, *self.maps.kernel_args(), *self._carried())
-        if not sv.running_on(self._served):
-            sv.start(_serve, self._served)
-        shift_t = t - i / tr.fps
+        self._finish()  # (the last request's answers, before its points are written again)
         _to_local(points, tr.offset_at(t), self._pre_local)
-        par = sv.par
+        self._post(0, t, t - i / tr.fps)
+        return True
+
+    def _post(self, which: int, t: float, shift_t: float) -> None:
+        """Post a query of the points (which 0: _pre_local, 1: local) at time t, shift_t from
+        this frame's maps, in chunks that the query server's thread and this one claim
+        (_work): the server starts on it at once; _finish answers the rest and waits."""
+        sv = self.server
+        if self._served is None:  # (None at every change of maps, set_time, and of arrays, _alloc)
+            self._served = (sv.par, self._pre_local, self.local, *self.maps.kernel_args(), *self._carried())
+        if self.helper and not sv.running_on(self._served):
+            sv.start(_serve, self._served)
+        ctl, par = sv.ctl, sv.par
+        ctl[NEXT] = sv.next_request << 32  # first: a thread holding the last request claims no more of it
+        ctl[FINISHED] = ctl[ASKED] = 0
+        ctl[N_CHUNKS] = -(-self._n // CHUNK)
+        ctl[WHICH] = which
+        ctl[SERIAL] = self._k_serial
         par[0], par[1], par[2], par[3], par[4] = t, self.tol, self._vmax * abs(shift_t), shift_t, self._vmax
         par[5:8] = self._root_v
-        sv.ctl[SERIAL] = self._k_serial
-        sv.request()
-        return True
+        sv.request(launch=self.helper)
+        self._posted = True
+
+    def _finish(self) -> None:
+        """Answer what the server's thread has not claimed of the last request, and wait for
+        the chunks it holds."""
+        if not self._posted:
+            return
+        if _help(self.server.ctl, self.help_wait, *self._served) < 0:
+            raise SimulationError("the collision query server stopped answering (its thread died holding "
+                                  "part of a query); this is a bug -- please report it")
+        self._posted = False
+        self.last_asked = int(self.server.ctl[ASKED])  # (points the request asked the maps for)
+        self.stats["asked"] += self.last_asked
 
     def _carried(self) -> tuple:
         """_query_cached's arrays after the maps': the carried answers, then the answers."""
@@ -452,22 +548,17 @@ class TrackCollider:
 
     def _stop_server(self) -> None:
         """Stop serving this frame's maps (its answers are in the carried arrays)."""
-        sv = self.server
-        sv.stop()
+        self._finish()
+        self.server.stop()
         self._served = None
-        self.stats["asked"] += int(sv.ctl[ASKED])
-        sv.ctl[ASKED] = 0
 
     def query(self, points: np.ndarray):
-        self.server.wait()
+        self._finish()
         if points.shape[0] != self._n:
             self._alloc(points.shape[0])
         _to_local(points, self._offset, self.local)
-        t = self._t
-        widened = self._vmax * abs(self._shift_t)
-        self.stats["asked"] += _query_cached(
-            self.local, t, self._k_serial, self.tol, widened, self._shift_t, self._root_v, self._vmax,
-            REACH, MAX_AGE, SLACK, NEAR, *self.maps.kernel_args(), *self._carried())
+        self._post(1, self._t, self._shift_t)
+        self._finish()
         self.stats["points"] += points.shape[0]
         return self.status, self.normal, self.velocity, self.depth
 
@@ -476,6 +567,8 @@ class TrackCollider:
         thread (its renderer and context)."""
         self._stop_server()
         self.server.close()
+        self.stats["query_chunks"] = {"server": int(self.server.ctl[SERVER_CHUNKS]),
+                                      "solver": int(self.server.ctl[SOLVER_CHUNKS])}
         if self._pool is not None:
             for fut in self._pending.values():
                 fut.cancel()

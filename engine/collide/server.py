@@ -50,13 +50,13 @@ def _end(ctl: np.ndarray, jobs: Queue) -> None:
 
 
 class SpinServer:
-    """The thread and its control words (ctl: int64, 8 words; par: float64 parameters for the
+    """The thread and its control words (ctl: int64, 16 words; par: float64 parameters for the
     kernel). The thread starts with the first start(); close() -- or dropping the server --
     ends it."""
 
     def __init__(self, name: str):
         self.name = name
-        self.ctl = np.zeros(8, np.int64)
+        self.ctl = np.zeros(16, np.int64)
         self.par = np.zeros(16)
         self._req = 0
         self._thread: threading.Thread | None = None
@@ -83,9 +83,15 @@ class SpinServer:
         self.ctl[RUNNING] = 1
         self._jobs.put((self._kernel, (self.ctl, *self._args)))
 
-    def request(self) -> None:
-        """Post a request (the arrays and par hold what it asks; the kernel reads ctl[REQ] last)."""
-        if not self.ctl[RUNNING]:  # it returned after a while without requests: again
+    @property
+    def next_request(self) -> int:
+        """The number request() will post next (a kernel may tag its own words with it)."""
+        return self._req + 1
+
+    def request(self, launch: bool = True) -> None:
+        """Post a request (the arrays and par hold what it asks; the kernel reads ctl[REQ] last).
+        launch False: the kernel is not (re)started for it (the poster answers it itself)."""
+        if launch and not self.ctl[RUNNING]:  # it returned after a while without requests: again
             self._launch()
         self._req += 1
         self.ctl[REQ] = self._req  # (numpy's stores are in program order)

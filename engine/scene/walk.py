@@ -344,6 +344,8 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
         "map_render_seconds": collider.stats.get("render_seconds", collider.stats["map_seconds"]),
         "maps_rendered_ahead": o.render_ahead and o.collision == "image",
         "map_memory_mb": collider.stats["map_bytes"] / 2 ** 20,
+        # the collision queries' chunks answered by the query server's thread (the rest: the solver's)
+        "query_server_share": _server_share(collider.stats.get("query_chunks")),
         "penetration_mm": {"max": pmax, "p99": p99},  # over all vertices of all frames
         "strain_max": max(f["strain_max"] for f in per_frame),
         "wall_seconds": {"walking": wall_walk, "penetration_check": t_pen, "total": time.perf_counter() - t_all},
@@ -351,6 +353,13 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
         "per_frame": per_frame,
     }
     return WalkResult(garment_frames=frames, triangles=drape.triangles, track=track, report=report)
+
+
+def _server_share(chunks: dict | None) -> float | None:
+    """The query server's share of the queries' chunks (None: no server, object-space collision)."""
+    if not chunks or not (chunks["server"] + chunks["solver"]):
+        return None
+    return chunks["server"] / (chunks["server"] + chunks["solver"])
 
 
 def walk_report(drape_report: dict, walk: dict) -> dict:
