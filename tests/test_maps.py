@@ -231,6 +231,45 @@ def test_inside_outside_agrees_with_exact_sdf_sphere(sphere_maps, tol):
 
 
 @inner
+def test_rows_shared_with_a_helper_thread_answer_as_one_thread_does(sphere_maps):
+    """MapCollider.query_rows with many rows shares them, in chunks, with a helper thread:
+    whichever thread answers a chunk, the answers are the ones a collider answering alone
+    gives, bit for bit (the rows not asked keep their answers); a few rows stay on the
+    caller's thread; release() ends the helper's thread."""
+    import threading
+
+    import engine.collide.collider as cc
+    from engine.collide.collider import MapCollider
+    from engine.collide.server import SERVER_CHUNKS, SOLVER_CHUNKS
+
+    _, all_maps = sphere_maps
+    rng = np.random.default_rng(5)
+    d = rng.normal(size=(6000, 3))
+    pts = d / np.linalg.norm(d, axis=1, keepdims=True) * (R + rng.uniform(-0.01, 0.02, (6000, 1)))
+    cols = [MapCollider(all_maps[0.005], helper=h) for h in (True, False)]
+    rows = np.zeros(len(pts), np.int64)
+    try:
+        for c in cols:
+            c.query(pts)
+        for step in range(30):
+            x = pts + rng.normal(0.0, 0.002, pts.shape)
+            k = [10, cc.SHARE_ROWS, 1000, 5999][step % 4]
+            rows[:k] = np.sort(rng.choice(len(pts), k, replace=False))
+            got = [[a.copy() for a in c.query_rows(x, rows, k)] for c in cols]
+            for g, w in zip(*got):
+                assert np.array_equal(g, w)
+        assert np.any(got[0][0] == 2) and np.any(got[0][0] == 0)
+        ctl = cols[0].server.ctl
+        assert ctl[SERVER_CHUNKS] > 0 and ctl[SOLVER_CHUNKS] > 0
+        assert cols[1].server is None and cols[0].stats["shared_rows"] > 0 == cols[1].stats["shared_rows"]
+        assert any(t.name == "map-query-server" for t in threading.enumerate())
+    finally:
+        for c in cols:
+            c.release()
+    assert not any(t.name == "map-query-server" for t in threading.enumerate())
+
+
+@inner
 def test_inside_outside_agrees_with_exact_sdf_box():
     from engine.collide.maps import render_body_maps
     from engine.collide.query import query_points

@@ -602,7 +602,7 @@ def test_a_dead_query_server_is_an_error_not_a_hang(monkeypatch):
     answers every chunk itself, the same answers. One that died holding a chunk of a query is
     an error once the wait for it ends -- not a hang, not a half answer."""
     import engine.collide.moving as mv
-    from engine.collide.server import REQ
+    from engine.collide.server import NEXT, REQ
     from engine.errors import SimulationError
 
     def broken(*args):
@@ -625,7 +625,7 @@ def test_a_dead_query_server_is_an_error_not_a_hang(monkeypatch):
         # a request with its only chunk claimed (by a thread that then died) and not finished
         col._post(1, col._t, col._shift_t)
         ctl = col.server.ctl
-        ctl[mv.NEXT] = (int(ctl[REQ]) << 32) | 1
+        ctl[NEXT] = (int(ctl[REQ]) << 32) | 1
         col.help_wait = 3 * 10 ** 8  # ~0.1 s
         with pytest.raises(SimulationError, match="query server stopped answering"):
             col._finish()

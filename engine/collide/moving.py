@@ -84,9 +84,10 @@ from engine.collide.collider import alloc_answers
 from engine.collide.gl import drop_thread_context
 from engine.collide.maps import CollisionMaps, MapRenderer
 from engine.collide.query import query_point_into
-from engine.collide.server import DONE, IDLE, REQ, RUNNING, STOP, SpinServer
+from engine.collide.server import (ASKED, DONE, REQ, RUNNING, SERVER_CHUNKS, SOLVER_CHUNKS, SpinServer, chunk_done,
+                                   claim, serve_wait, wait_chunks)
 from engine.errors import SimulationError
-from engine.jit import atomic_add, atomic_cas, atomic_load, atomic_store, cycle_counter, serial_kernel, spin_pause
+from engine.jit import atomic_load, atomic_store, serial_kernel
 
 REACH = 0.002  # m: a point that moved this far (in the root's frame) since its answer asks again
 MAX_AGE = 0.002  # s: ... and so does an answer this old
@@ -159,11 +160,7 @@ def _to_local(points, offset, out):
         out[p, 2] = points[p, 2] - oz
 
 
-# the walking query server's own control words (engine.collide.server: ctl[4:]): the maps'
-# serial, points the request asked the maps for, the next chunk to claim (the request's number
-# << 32 | chunk), chunks finished, chunks in the request, which points it asks (0: predicted,
-# 1: this step's); chunks the server's thread answered, and the solver's thread (running counts)
-SERIAL, ASKED, NEXT, FINISHED, N_CHUNKS, WHICH, SERVER_CHUNKS, SOLVER_CHUNKS = 4, 5, 6, 7, 8, 9, 10, 11
+SERIAL, WHICH = 4, 9  # the walking query server's own words: the maps' serial, which points (0: predicted, 1: this step's)
 CHUNK = 512  # points a claim takes
 HELP_WAIT = 3 * 10 ** 10  # time-stamp counter ticks (~10 s): a chunk not finished by then is lost
 
@@ -173,21 +170,15 @@ def _work(ctl, r, tally, par, pre_local, local, surf, vel, has_vel, kind, side_s
           c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index):
     """Answer chunks of request r (_query_cached with the parameters in par: t, tol, widened,
     shift_t, vmax, root_v; ctl[SERIAL]; the points pre_local or local, ctl[WHICH]) until none is
-    left to claim; returns the points asked. Either thread may run it at any time: a chunk is
-    claimed by swapping ctl[NEXT] from (r, c) to (r, c + 1), so each chunk is answered once, by
-    whichever thread claimed it, and a thread still holding an older request's number claims
-    nothing (TrackCollider._post writes NEXT first). Each chunk adds the points it asked to
-    ctl[ASKED] before it counts as finished, and one to ctl[tally] (the thread's count)."""
+    left to claim (engine.collide.server.claim: each chunk by one thread, whichever); returns
+    the points this thread asked."""
     asked = 0
     root_v = np.empty(3)
     n = local.shape[0]
     while True:
-        w = atomic_load(ctl, NEXT)
-        c = w & 0xFFFFFFFF
-        if (w >> 32) != r or c >= ctl[N_CHUNKS]:
+        c = claim(ctl, r)
+        if c < 0:
             return asked
-        if not atomic_cas(ctl, NEXT, w, w + 1):
-            continue
         for k in range(3):
             root_v[k] = par[5 + k]
         pts = local if ctl[WHICH] != 0 else pre_local
@@ -195,10 +186,8 @@ def _work(ctl, r, tally, par, pre_local, local, surf, vel, has_vel, kind, side_s
                           root_v, par[4], REACH, MAX_AGE, SLACK, NEAR, surf, vel, has_vel, kind, side_src, geom,
                           layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
                           status, surface, penetration, normal, velocity, map_index)
-        atomic_add(ctl, ASKED, k)
         asked += k
-        ctl[tally] += 1
-        atomic_add(ctl, FINISHED, 1)
+        chunk_done(ctl, tally, k)
 
 
 @serial_kernel
@@ -207,15 +196,10 @@ def _help(ctl, wait, par, pre_local, local, surf, vel, has_vel, kind, side_src, 
     """The solver's thread: answer what is left of the last request (_work), then wait for the
     chunks the server holds. Returns the points this thread asked, or -1 when a chunk was not
     finished within `wait` time-stamp counter ticks (the server's thread died holding it)."""
-    asked = _work(ctl, atomic_load(ctl, REQ), SOLVER_CHUNKS, par, pre_local, local, surf, vel, has_vel, kind, side_src, geom,
-                  layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
+    asked = _work(ctl, atomic_load(ctl, REQ), SOLVER_CHUNKS, par, pre_local, local, surf, vel, has_vel, kind,
+                  side_src, geom, layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
                   status, surface, penetration, normal, velocity, map_index)
-    since = cycle_counter()
-    while atomic_load(ctl, FINISHED) < ctl[N_CHUNKS]:
-        if cycle_counter() - since > wait:
-            return -1
-        spin_pause()
-    return asked
+    return asked if wait_chunks(ctl, wait) else -1
 
 
 @serial_kernel
@@ -226,20 +210,14 @@ def _serve(ctl, par, pre_local, local, surf, vel, has_vel, kind, side_src, geom,
     ctl[STOP], or after IDLE ticks without a request."""
     last = ctl[DONE]
     atomic_store(ctl, RUNNING, 2)
-    idle_since = cycle_counter()
     while True:
-        r = atomic_load(ctl, REQ)
-        if r == last:
-            if atomic_load(ctl, STOP) != 0 or cycle_counter() - idle_since > IDLE:
-                atomic_store(ctl, RUNNING, 0)
-                return
-            spin_pause()
-            continue
+        r = serve_wait(ctl, last)
+        if r < 0:
+            return
         last = r
         _work(ctl, r, SERVER_CHUNKS, par, pre_local, local, surf, vel, has_vel, kind, side_src, geom, layout, zz,
               c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index)
         atomic_store(ctl, DONE, r)
-        idle_since = cycle_counter()
 
 
 @serial_kernel
@@ -519,14 +497,11 @@ class TrackCollider:
         if self.helper and not sv.running_on(self._served):
             sv.start(_serve, self._served)
         ctl, par = sv.ctl, sv.par
-        ctl[NEXT] = sv.next_request << 32  # first: a thread holding the last request claims no more of it
-        ctl[FINISHED] = ctl[ASKED] = 0
-        ctl[N_CHUNKS] = -(-self._n // CHUNK)
         ctl[WHICH] = which
         ctl[SERIAL] = self._k_serial
         par[0], par[1], par[2], par[3], par[4] = t, self.tol, self._vmax * abs(shift_t), shift_t, self._vmax
         par[5:8] = self._root_v
-        sv.request(launch=self.helper)
+        sv.post_chunks(-(-self._n // CHUNK), launch=self.helper)
         self._posted = True
 
     def _finish(self) -> None:

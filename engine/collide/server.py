@@ -26,12 +26,69 @@ import weakref
 from queue import Queue
 
 import numpy as np
+from numba import njit
 
 from engine.errors import SimulationError
+from engine.jit import atomic_add, atomic_cas, atomic_load, atomic_store, cycle_counter, spin_pause
 
 REQ, DONE, STOP, RUNNING = range(4)  # control words; the kernels may use ctl[4:] for their own
+# ... and a request answered in chunks (post_chunks; claim, chunk_done, wait_chunks): points the
+# request asked the maps for, the next chunk to claim (the request's number << 32 | chunk),
+# chunks finished, chunks in the request; chunks the server's thread answered, and the
+# poster's (running counts)
+ASKED, NEXT, FINISHED, N_CHUNKS, SERVER_CHUNKS, SOLVER_CHUNKS = 5, 6, 7, 8, 10, 11
 WAIT = 30.0  # s: the longest wait for an answer before the server is taken as dead
 IDLE = 3 * 10 ** 8  # time-stamp counter ticks (~0.1 s) without a request after which a kernel returns
+
+
+@njit(cache=True, inline="always")
+def serve_wait(ctl, last):
+    """In a server kernel: spin until a request after `last` is posted and return its number, or
+    return -1 (ctl[RUNNING] set to 0) on ctl[STOP] or after IDLE ticks without one."""
+    since = cycle_counter()
+    while True:
+        r = atomic_load(ctl, REQ)
+        if r != last:
+            return r
+        if atomic_load(ctl, STOP) != 0 or cycle_counter() - since > IDLE:
+            atomic_store(ctl, RUNNING, 0)
+            return -1
+        spin_pause()
+
+
+@njit(cache=True, inline="always")
+def claim(ctl, r):
+    """The next chunk of request r, claimed for this thread (either thread may call it at any
+    time: ctl[NEXT] is swapped from (r, c) to (r, c + 1), so each chunk goes to one thread, and
+    a thread holding an older request's number claims nothing), or -1 when none is left."""
+    while True:
+        w = atomic_load(ctl, NEXT)
+        c = w & 0xFFFFFFFF
+        if (w >> 32) != r or c >= ctl[N_CHUNKS]:
+            return -1
+        if atomic_cas(ctl, NEXT, w, w + 1):
+            return c
+
+
+@njit(cache=True, inline="always")
+def chunk_done(ctl, tally, asked):
+    """A claimed chunk answered: its asked points counted (ctl[ASKED]), one for the thread
+    (ctl[tally]), and then -- last -- counted as finished."""
+    atomic_add(ctl, ASKED, asked)
+    ctl[tally] += 1
+    atomic_add(ctl, FINISHED, 1)
+
+
+@njit(cache=True, inline="always")
+def wait_chunks(ctl, wait):
+    """Spin until every chunk of the request is finished; False after `wait` ticks (a thread
+    died holding one)."""
+    since = cycle_counter()
+    while atomic_load(ctl, FINISHED) < ctl[N_CHUNKS]:
+        if cycle_counter() - since > wait:
+            return False
+        spin_pause()
+    return True
 
 
 def _thread(jobs: Queue) -> None:
@@ -95,6 +152,15 @@ class SpinServer:
             self._launch()
         self._req += 1
         self.ctl[REQ] = self._req  # (numpy's stores are in program order)
+
+    def post_chunks(self, n_chunks: int, launch: bool = True) -> None:
+        """Post a request answered in n_chunks chunks (claim): the kernel's own words and par
+        first, then this (the chunk count after the claim word: see claim)."""
+        ctl = self.ctl
+        ctl[NEXT] = self.next_request << 32
+        ctl[FINISHED] = ctl[ASKED] = 0
+        ctl[N_CHUNKS] = n_chunks
+        self.request(launch)
 
     def wait(self) -> None:
         """Wait for the last request's answer (a dead or stuck server is an error, not a hang)."""

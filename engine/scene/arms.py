@@ -154,8 +154,11 @@ def lower_arms(lift: ArmLift, res: DrapeResult, options: DrapeOptions, *, texel:
         if it % 200 == 0:
             progress("settling", 0.0, "relaxing the cloth after lowering the arms")
     t_relax = time.perf_counter() - t0
-    settled = drape(res.model, state, collider, o, lambda s, f, m: progress("settling", f, m), observer,
-                    gravity_from=1.0, solver=solver)
+    try:
+        settled = drape(res.model, state, collider, o, lambda s, f, m: progress("settling", f, m), observer,
+                        gravity_from=1.0, solver=solver)
+    finally:
+        collider.release()  # (its query helper thread)
     w = walk.report
     n_walk = int(w["frames"] * w["substeps_per_frame"])
     walk_cloth_s = w["ms_per_frame"]["cloth"] * w["frames"] / 1000

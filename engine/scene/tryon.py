@@ -132,6 +132,9 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
     except SimulationError as e:
         _carried_hint(e, placement_note)
         raise
+    finally:
+        if hasattr(collider, "release"):  # (the map collider's query helper thread)
+            collider.release()
     res.spec = spec
     if lift is not None:
         from engine.scene.arms import lower_arms
