@@ -263,10 +263,34 @@ def test_rows_shared_with_a_helper_thread_answer_as_one_thread_does(sphere_maps)
         assert ctl[SERVER_CHUNKS] > 0 and ctl[SOLVER_CHUNKS] > 0
         assert cols[1].server is None and cols[0].stats["shared_rows"] > 0 == cols[1].stats["shared_rows"]
         assert any(t.name == "map-query-server" for t in threading.enumerate())
+        # a helper that keeps making the solver wait (the machine has no core for it) is let go;
+        # the collider answers alone from then on, the same answers
+        for _ in range(3):
+            cols[0].stalls.saw(10 ** 9)
+        assert cols[0].stalls.lost
+        rows[:1000] = np.arange(1000)
+        got = [[a.copy() for a in c.query_rows(pts, rows, 1000)] for c in cols]
+        for g, w in zip(*got):
+            assert np.array_equal(g, w)
     finally:
         for c in cols:
             c.release()
     assert not any(t.name == "map-query-server" for t in threading.enumerate())
+
+
+@inner
+def test_stall_watch_lets_a_helper_go_only_when_it_keeps_stalling():
+    from engine.collide.server import STALL, STALLS, StallWatch
+
+    w = StallWatch()
+    for i in range(1000):  # rare stalls (a descheduled moment on a noisy machine): kept
+        w.saw(2 * STALL if i % 100 == 0 else STALL // 10)
+    assert not w.lost and w.stalls == 10
+    w = StallWatch()
+    for i in range(STALLS):
+        assert not w.lost
+        w.saw(2 * STALL)
+    assert w.lost
 
 
 @inner

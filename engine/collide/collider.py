@@ -7,8 +7,8 @@ import numpy as np
 
 from engine.collide.maps import CollisionMaps
 from engine.collide.query import query_point_into, query_batch_serial, query_rows_serial
-from engine.collide.server import DONE, REQ, RUNNING, SERVER_CHUNKS, SOLVER_CHUNKS, SpinServer, chunk_done, claim, \
-    serve_wait, wait_chunks
+from engine.collide.server import DONE, REQ, RUNNING, SERVER_CHUNKS, SOLVER_CHUNKS, SpinServer, StallWatch, chunk_done, \
+    claim, helper_default, serve_wait, wait_chunks
 from engine.errors import SimulationError
 from engine.jit import atomic_load, atomic_store, serial_kernel
 
@@ -42,7 +42,8 @@ def _rows_work(ctl, r, tally, par, points, rows, surf, vel, has_vel, kind, side_
 def _rows_help(ctl, wait, par, points, rows, surf, vel, has_vel, kind, side_src, geom, layout, zz,
                status, surface, penetration, normal, velocity, map_index):
     """The solver's thread: the chunks of the last request not yet claimed, then the wait for
-    those the server holds; False when one was not finished within `wait` ticks."""
+    those the server holds; returns the ticks it waited, -1 when one was not finished within
+    `wait` ticks."""
     _rows_work(ctl, atomic_load(ctl, REQ), SOLVER_CHUNKS, par, points, rows, surf, vel, has_vel, kind, side_src,
                geom, layout, zz, status, surface, penetration, normal, velocity, map_index)
     return wait_chunks(ctl, wait)
@@ -84,16 +85,18 @@ class MapCollider:
 
     depth_along_z = True  # depth is measured along z (query.py), not along the normal
 
-    def __init__(self, maps: CollisionMaps, tol: float | None = None, helper: bool = True):
-        """helper: a query of many rows is shared with a helper thread (query_rows)."""
+    def __init__(self, maps: CollisionMaps, tol: float | None = None, helper: bool | None = None):
+        """helper: a query of many rows is shared with a helper thread (query_rows); None: unless
+        the environment says not to (engine.collide.server.helper_default)."""
         self.maps = maps
         self.tol = float(maps.tol if tol is None else tol)
         self._n = -1
         self.version = 0  # bumped when the maps change (solvers re-query then)
-        self.helper = helper
+        self.helper = helper_default() if helper is None else helper
         self.server: SpinServer | None = None  # the row query server, made at the first shared query
         self._served = None  # its kernel's arguments, and what they were made for
         self.help_wait = ROWS_WAIT
+        self.stalls = StallWatch()  # (the helper is let go when the machine has no core for it)
         self.stats = {"rows": 0, "shared_rows": 0}
 
     def set_maps(self, maps: CollisionMaps) -> None:
@@ -122,7 +125,7 @@ class MapCollider:
         if points.shape[0] != self._n:
             return self.query(points)
         self.stats["rows"] += n_rows
-        if not self.helper or n_rows < SHARE_ROWS:
+        if not self.helper or n_rows < SHARE_ROWS or self.stalls.lost:
             query_rows_serial(points, rows, n_rows, self.tol, *self.maps.kernel_args(), self.status, self.surface,
                               self.depth, self.normal, self.velocity, self.map_index)
             return self.status, self.normal, self.velocity, self.depth
@@ -139,10 +142,15 @@ class MapCollider:
         sv.par[0] = self.tol
         sv.ctl[N_ROWS] = n_rows
         sv.post_chunks(-(-n_rows // ROW_CHUNK))
-        if not _rows_help(sv.ctl, self.help_wait, *args):
+        waited = _rows_help(sv.ctl, self.help_wait, *args)
+        if waited < 0:
             raise SimulationError("the collision query server stopped answering (its thread died holding part "
                                   "of a query); this is a bug -- please report it")
         self.stats["shared_rows"] += n_rows
+        self.stalls.saw(waited)
+        if self.stalls.lost:
+            self.stats["helper_let_go_after_rows"] = self.stats["rows"]
+            self.release()
         return self.status, self.normal, self.velocity, self.depth
 
     def release(self) -> None:

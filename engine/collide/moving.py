@@ -84,8 +84,8 @@ from engine.collide.collider import alloc_answers
 from engine.collide.gl import drop_thread_context
 from engine.collide.maps import CollisionMaps, MapRenderer
 from engine.collide.query import query_point_into
-from engine.collide.server import (ASKED, DONE, REQ, RUNNING, SERVER_CHUNKS, SOLVER_CHUNKS, SpinServer, chunk_done,
-                                   claim, serve_wait, wait_chunks)
+from engine.collide.server import (ASKED, DONE, REQ, RUNNING, SERVER_CHUNKS, SOLVER_CHUNKS, SpinServer, StallWatch,
+                                   chunk_done, claim, helper_default, serve_wait, wait_chunks)
 from engine.errors import SimulationError
 from engine.jit import atomic_load, atomic_store, serial_kernel
 
@@ -194,12 +194,12 @@ def _work(ctl, r, tally, par, pre_local, local, surf, vel, has_vel, kind, side_s
 def _help(ctl, wait, par, pre_local, local, surf, vel, has_vel, kind, side_src, geom, layout, zz,
           c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index):
     """The solver's thread: answer what is left of the last request (_work), then wait for the
-    chunks the server holds. Returns the points this thread asked, or -1 when a chunk was not
-    finished within `wait` time-stamp counter ticks (the server's thread died holding it)."""
-    asked = _work(ctl, atomic_load(ctl, REQ), SOLVER_CHUNKS, par, pre_local, local, surf, vel, has_vel, kind,
-                  side_src, geom, layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
-                  status, surface, penetration, normal, velocity, map_index)
-    return asked if wait_chunks(ctl, wait) else -1
+    chunks the server holds. Returns the ticks it waited, or -1 when a chunk was not finished
+    within `wait` time-stamp counter ticks (the server's thread died holding it)."""
+    _work(ctl, atomic_load(ctl, REQ), SOLVER_CHUNKS, par, pre_local, local, surf, vel, has_vel, kind,
+          side_src, geom, layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
+          status, surface, penetration, normal, velocity, map_index)
+    return wait_chunks(ctl, wait)
 
 
 @serial_kernel
@@ -291,14 +291,15 @@ class TrackCollider:
     solver_carries = False  # the body moves every step; it carries answers itself (_query_cached)
 
     def __init__(self, track: BodyTrack, renderer, tol: float, keep: bool = True,
-                 compact: bool = True, ahead: bool = False, helper: bool = True):
+                 compact: bool = True, ahead: bool = False, helper: bool | None = None):
         """keep: keep each frame's maps for reuse (a periodic track); compact: keep them as float16.
         ahead: render each frame's maps one frame ahead in a helper thread while the solver works
         (the body's motion does not depend on the cloth); `renderer` is then a function that makes
         the MapRenderer, called in that thread (with own_context=True: GL objects belong to the
         context they were made in). release() ends the thread.
         helper: the query server's thread takes part in the queries (module doc); False: this
-        thread answers them alone (the same answers)."""
+        thread answers them alone (the same answers); None: unless the environment says not to
+        (engine.collide.server.helper_default)."""
         self.track, self.renderer, self.tol = track, (None if ahead else renderer), float(tol)
         self._make_renderer = renderer if ahead else None
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="maps") if ahead else None
@@ -329,8 +330,9 @@ class TrackCollider:
         self._zz32 = None  # a rendered frame's depth pairs (CollisionMaps.depth_pairs)
         # the query server (prefetch), and the arguments of its kernel while it serves a frame's maps
         self.server = SpinServer("query-server")
-        self.helper = helper
+        self.helper = helper_default() if helper is None else helper
         self.help_wait = HELP_WAIT
+        self.stalls = StallWatch()
         self.last_asked = 0
         self._served = None
         self._posted = False  # a query request posted and not yet known to be answered (_finish)
@@ -509,10 +511,17 @@ class TrackCollider:
         the chunks it holds."""
         if not self._posted:
             return
-        if _help(self.server.ctl, self.help_wait, *self._served) < 0:
+        waited = _help(self.server.ctl, self.help_wait, *self._served)
+        if waited < 0:
             raise SimulationError("the collision query server stopped answering (its thread died holding "
                                   "part of a query); this is a bug -- please report it")
         self._posted = False
+        if self.helper:
+            self.stalls.saw(waited)
+            if self.stalls.lost:  # the machine has no core for it: answer alone from now on
+                self.helper = False
+                self.stats["helper_let_go_at"] = self._t
+                self.server.stop()
         self.last_asked = int(self.server.ctl[ASKED])  # (points the request asked the maps for)
         self.stats["asked"] += self.last_asked
 

@@ -1,25 +1,32 @@
-"""The query server's thread: a helper thread that runs one nogil kernel at a time and takes
-requests from the solver's thread through an array of control words -- no GIL, no sleeping.
+"""The query servers' thread: a helper thread that runs one nogil kernel at a time and takes
+requests from the solver's thread through an array of control words -- no GIL.
 
-The kernel (a serial_kernel: engine.collide.moving._serve, the walking query server) sets
-ctl[RUNNING] to 2, spins until ctl[REQ] goes past the last request it answered, answers, and
-sets ctl[DONE] to the request. It returns when ctl[STOP] is set, or by itself after IDLE ticks
-(~0.1 s) without a request -- then ctl[RUNNING] is 0 and the next request starts it again: a
-server its owner forgot does not spin on. It spins rather than sleeps because waking a thread
-took ~0.25 ms here (median; 0.7 ms at the 90th percentile, measured), as long as the work it was
-woken for. A wait for an answer is an error after WAIT seconds of a running kernel, or as soon
-as the thread is dead; not while the kernel has not started (its first call in a process may
-compile it, for seconds).
+The kernel (a serial_kernel: engine.collide.moving._serve, the walking query server, and
+engine.collide.collider._rows_serve, the drape's) sets ctl[RUNNING] to 2, waits until ctl[REQ]
+goes past the last request it answered (serve_wait), answers, and sets ctl[DONE] to the request.
+A request is answered in chunks that the kernel and the poster claim as they come (post_chunks,
+claim, chunk_done, wait_chunks): the poster never waits for a late server, only for the chunks it
+holds. Between requests the kernel spins rather than sleeps: waking a thread took ~0.25 ms here
+(median; 0.7 ms at the 90th percentile), as long as the work it was woken for (measured again with
+a futex: a kernel that slept after 2 ms without a request made the drape 8-14 % slower an
+iteration). A spinning helper takes a core that other work on the machine may want: a collider
+lets its helper go when waits for the helper's chunks show it is not getting one (StallWatch),
+and TRYON_QUERY_HELPER=0 turns helpers off (helper_default). The kernel returns when ctl[STOP]
+is set, or by itself after IDLE ticks (~0.1 s) without a request -- then ctl[RUNNING] is 0 and
+the next request starts it again. A wait for an
+answer is an error after WAIT seconds of a running kernel, or as soon as the thread is dead; not
+while the kernel has not started (its first call in a process may compile it, for seconds).
 
     server = SpinServer("query-server")
     server.start(kernel, args)      # (again whenever the arrays change)
-    server.request()                # ... the kernel works while this thread goes on
-    server.wait()                   # its answer is in the arrays now
+    server.post_chunks(n)           # ... the kernel works while this thread goes on
+    ... this thread claims what is left, then waits for the kernel's chunks (wait_chunks)
     server.close()
 """
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 import weakref
@@ -81,14 +88,49 @@ def chunk_done(ctl, tally, asked):
 
 @njit(cache=True, inline="always")
 def wait_chunks(ctl, wait):
-    """Spin until every chunk of the request is finished; False after `wait` ticks (a thread
-    died holding one)."""
+    """Spin until every chunk of the request is finished; returns the ticks it waited, or -1
+    after `wait` ticks (a thread died holding one)."""
     since = cycle_counter()
     while atomic_load(ctl, FINISHED) < ctl[N_CHUNKS]:
         if cycle_counter() - since > wait:
-            return False
+            return -1
         spin_pause()
-    return True
+    return cycle_counter() - since
+
+
+STALL = 900_000  # time-stamp counter ticks (~0.3 ms): a wait for the helper's chunks this long is a stall
+STALLS = 3  # ... and after this many, in at least STALL_SHARE of the shared requests, the helper is let go
+
+
+class StallWatch:
+    """Whether a collider's helper thread still pays: a wait for the chunks it holds longer than
+    STALL means it was not running -- the machine's cores are busy with other work (other
+    try-ons), and a helper then makes the solver wait for a core instead of saving it time
+    (measured: two drapes at once on the two cores with helpers, 0.65-0.76 ms an iteration
+    against 0.31-0.34 without). After STALLS such waits, in at least STALL_SHARE of the shared
+    requests, `lost` turns True and the collider answers alone from then on (the same answers;
+    measured so, the two drapes at once: 0.35-0.41 ms an iteration; alone, the dress's drape
+    saw 0-1 stalls in ~1,600 shared requests)."""
+
+    STALL_SHARE = 0.02
+
+    def __init__(self):
+        self.requests = self.stalls = 0
+        self.lost = False
+
+    def saw(self, waited: int) -> None:
+        self.requests += 1
+        if waited > STALL:
+            self.stalls += 1
+            if self.stalls >= STALLS and self.stalls >= self.STALL_SHARE * self.requests:
+                self.lost = True
+
+
+def helper_default() -> bool:
+    """Whether colliders share their queries with a helper thread unless told (the environment's
+    TRYON_QUERY_HELPER=0 turns it off: a machine running as many try-ons at once as it has cores
+    has no idle core for the helpers to spin on)."""
+    return os.environ.get("TRYON_QUERY_HELPER", "1").strip() != "0"
 
 
 def _thread(jobs: Queue) -> None:
