@@ -12,6 +12,7 @@ handling.
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import threading
 import time
 
@@ -47,6 +48,10 @@ class JobManager:
 
     def start(self) -> None:
         self.recover()
+        if self.settings.workers >= (os.cpu_count() or 1):
+            # a try-on per core leaves no idle core for the solvers' query helper threads
+            # (engine.collide.server.helper_default); the workers inherit this
+            os.environ.setdefault("TRYON_QUERY_HELPER", "0")
         with self._lock:
             self.procs = [self._spawn() for _ in range(self.settings.workers)]
         self._thread = threading.Thread(target=self._monitor, daemon=True, name="tryon-monitor")
