@@ -346,6 +346,8 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
         "map_memory_mb": collider.stats["map_bytes"] / 2 ** 20,
         # the collision queries' chunks answered by the query server's thread (the rest: the solver's)
         "query_server_share": _server_share(collider.stats.get("query_chunks")),
+        # ... let go at this time (s) when it kept making the solver wait (engine.collide.server.StallWatch)
+        "query_helper_let_go_at": collider.stats.get("helper_let_go_at"),
         "penetration_mm": {"max": pmax, "p99": p99},  # over all vertices of all frames
         "strain_max": max(f["strain_max"] for f in per_frame),
         "wall_seconds": {"walking": wall_walk, "penetration_check": t_pen, "total": time.perf_counter() - t_all},
