@@ -679,3 +679,27 @@ def test_queries_shared_with_the_server_answer_as_one_thread_does():
             c.release()
         for r in rens:
             r.release()
+
+
+def test_stall_watch_lets_a_helper_go_when_the_solver_gets_too_little_of_a_core():
+    """A solver's thread that gets less than CPU_SHARE of a core (here: it sleeps between
+    requests, as a thread crowded off the cores waits) for CPU_WINDOWS windows lets its helper
+    go; one that computes between requests keeps it."""
+    import time
+
+    from engine.collide.server import CPU_WINDOW, CPU_WINDOWS, StallWatch
+
+    busy = StallWatch()
+    end = time.perf_counter() + (CPU_WINDOWS + 1) * CPU_WINDOW
+    while time.perf_counter() < end:
+        x = 0.0
+        for i in range(20000):
+            x += i * 0.5
+        busy.saw(0)
+    assert not busy.lost
+    idle = StallWatch()
+    end = time.perf_counter() + (CPU_WINDOWS + 1.5) * CPU_WINDOW
+    while time.perf_counter() < end and not idle.lost:
+        time.sleep(0.02)
+        idle.saw(0)
+    assert idle.lost and idle.stalls == 0

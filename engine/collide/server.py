@@ -102,6 +102,9 @@ def wait_chunks(ctl, wait):
 STALL = 900_000  # time-stamp counter ticks (~0.3 ms): a wait for the helper's chunks this long is a stall
 STALL_WINDOW = 100  # ... and when STALL_SHARE of the last this many shared requests stalled, the helper is let go
 STALL_SHARE = 0.25
+CPU_WINDOW = 0.25  # s of wall time: the solver's thread's share of a core is measured over this long ...
+CPU_SHARE = 0.55  # ... and when it stayed under this for CPU_WINDOWS windows in a row, the helper is let go
+CPU_WINDOWS = 3
 
 
 class StallWatch:
@@ -113,12 +116,20 @@ class StallWatch:
     requests stalled, `lost` turns True and the collider answers alone from then on (the same
     answers). A burst is not enough: while a walk renders its first cycle of maps in a third
     thread, the query server stalls now and then (measured: let go after 3 stalls in the first
-    0.05-0.2 s of 2 of 3 walks, each then 0.60 realtime instead of 0.69)."""
+    0.05-0.2 s of 2 of 3 walks, each then 0.60 realtime instead of 0.69).
+    Nor do stalls show every kind of crowding: two walks at once, each with its spinning helper,
+    stalled seldom but ran at 0.22-0.23 realtime where they ran at 0.44 without helpers -- each
+    solver's thread got 0.36-0.55 of a core (time.thread_time over wall time, 0.25 s windows)
+    against 0.63-0.99 for a walk alone (the lower ones while its maps are rendered). So the
+    helper is also let go when the solver's thread got less than CPU_SHARE of a core in
+    CPU_WINDOWS windows in a row."""
 
     def __init__(self):
         self.requests = self.stalls = 0
         self._recent: deque = deque(maxlen=STALL_WINDOW)
         self.lost = False
+        self.low_windows = 0
+        self._window = (time.perf_counter(), time.thread_time())
 
     def saw(self, waited: int) -> None:
         self.requests += 1
@@ -127,6 +138,14 @@ class StallWatch:
         self._recent.append(stalled)
         if len(self._recent) == STALL_WINDOW and sum(self._recent) >= STALL_SHARE * STALL_WINDOW:
             self.lost = True
+        now = time.perf_counter()
+        if now - self._window[0] >= CPU_WINDOW:
+            cpu = time.thread_time()
+            share = (cpu - self._window[1]) / (now - self._window[0])
+            self._window = (now, cpu)
+            self.low_windows = self.low_windows + 1 if share < CPU_SHARE else 0
+            if self.low_windows >= CPU_WINDOWS:
+                self.lost = True
 
 
 def helper_default() -> bool:
