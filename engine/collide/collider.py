@@ -7,15 +7,13 @@ import numpy as np
 
 from engine.collide.maps import CollisionMaps
 from engine.collide.query import query_point_into, query_batch_serial, query_rows_serial
-from engine.collide.server import DONE, REQ, RUNNING, SERVER_CHUNKS, SOLVER_CHUNKS, SpinServer, StallWatch, chunk_done, \
-    claim, helper_default, serve_wait, wait_chunks
-from engine.errors import SimulationError
+from engine.collide.server import DONE, HELP_WAIT, REQ, RUNNING, SERVER_CHUNKS, SOLVER_CHUNKS, SpinServer, StallWatch, \
+    after_help, chunk_done, claim, helper_default, serve_wait, wait_chunks
 from engine.jit import atomic_load, atomic_store, serial_kernel
 
 N_ROWS = 4  # the row query server's own word: rows in the request
 ROW_CHUNK = 128  # rows a claim takes
 SHARE_ROWS = 256  # a query of fewer rows is answered by the solver's thread alone (MapCollider.query_rows)
-ROWS_WAIT = 3 * 10 ** 10  # time-stamp counter ticks (~10 s): a chunk not finished by then is lost
 
 
 @serial_kernel(fastmath=False)
@@ -95,7 +93,7 @@ class MapCollider:
         self.helper = helper_default() if helper is None else helper
         self.server: SpinServer | None = None  # the row query server, made at the first shared query
         self._served = None  # its kernel's arguments, and what they were made for
-        self.help_wait = ROWS_WAIT
+        self.help_wait = HELP_WAIT
         self.stalls = StallWatch()  # (the helper is let go when the machine has no core for it)
         self.stats = {"rows": 0, "shared_rows": 0}
 
@@ -142,13 +140,9 @@ class MapCollider:
         sv.par[0] = self.tol
         sv.ctl[N_ROWS] = n_rows
         sv.post_chunks(-(-n_rows // ROW_CHUNK))
-        waited = _rows_help(sv.ctl, self.help_wait, *args)
-        if waited < 0:
-            raise SimulationError("the collision query server stopped answering (its thread died holding part "
-                                  "of a query); this is a bug -- please report it")
+        lost = after_help(_rows_help(sv.ctl, self.help_wait, *args), self.stalls)
         self.stats["shared_rows"] += n_rows
-        self.stalls.saw(waited)
-        if self.stalls.lost:
+        if lost:
             self.stats["helper_let_go_after_rows"] = self.stats["rows"]
             self.release()
         return self.status, self.normal, self.velocity, self.depth

@@ -84,9 +84,8 @@ from engine.collide.collider import alloc_answers
 from engine.collide.gl import drop_thread_context
 from engine.collide.maps import CollisionMaps, MapRenderer
 from engine.collide.query import query_point_into
-from engine.collide.server import (ASKED, DONE, REQ, RUNNING, SERVER_CHUNKS, SOLVER_CHUNKS, SpinServer, StallWatch,
-                                   chunk_done, claim, helper_default, serve_wait, wait_chunks)
-from engine.errors import SimulationError
+from engine.collide.server import (ASKED, DONE, HELP_WAIT, REQ, RUNNING, SERVER_CHUNKS, SOLVER_CHUNKS, SpinServer,
+                                   StallWatch, after_help, chunk_done, claim, helper_default, serve_wait, wait_chunks)
 from engine.jit import atomic_load, atomic_store, serial_kernel
 
 REACH = 0.002  # m: a point that moved this far (in the root's frame) since its answer asks again
@@ -162,7 +161,6 @@ def _to_local(points, offset, out):
 
 SERIAL, WHICH = 4, 9  # the walking query server's own words: the maps' serial, which points (0: predicted, 1: this step's)
 CHUNK = 512  # points a claim takes
-HELP_WAIT = 3 * 10 ** 10  # time-stamp counter ticks (~10 s): a chunk not finished by then is lost
 
 
 @serial_kernel
@@ -511,17 +509,13 @@ class TrackCollider:
         the chunks it holds."""
         if not self._posted:
             return
-        waited = _help(self.server.ctl, self.help_wait, *self._served)
-        if waited < 0:
-            raise SimulationError("the collision query server stopped answering (its thread died holding "
-                                  "part of a query); this is a bug -- please report it")
+        lost = after_help(_help(self.server.ctl, self.help_wait, *self._served),
+                          self.stalls if self.helper else None)
         self._posted = False
-        if self.helper:
-            self.stalls.saw(waited)
-            if self.stalls.lost:  # the machine has no core for it: answer alone from now on
-                self.helper = False
-                self.stats["helper_let_go_at"] = self._t
-                self.server.stop()
+        if lost:  # the machine has no core for it: answer alone from now on
+            self.helper = False
+            self.stats["helper_let_go_at"] = self._t
+            self.server.stop()
         self.last_asked = int(self.server.ctl[ASKED])  # (points the request asked the maps for)
         self.stats["asked"] += self.last_asked
 

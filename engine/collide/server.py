@@ -148,6 +148,23 @@ class StallWatch:
                 self.lost = True
 
 
+HELP_WAIT = 3 * 10 ** 10  # time-stamp counter ticks (~10 s): a chunk a helper holds not finished by then is lost
+
+
+def after_help(waited: int, stalls: StallWatch | None) -> bool:
+    """After the poster answered what was left of a request and waited for the helper's chunks
+    (wait_chunks: the ticks it waited, or -1): an error when a chunk was lost (the helper's
+    thread died holding it), else the wait goes to `stalls` (None: not watched); returns whether
+    the helper is to be let go."""
+    if waited < 0:
+        raise SimulationError("the collision query server stopped answering (its thread died holding part of a "
+                              "query); this is a bug -- please report it")
+    if stalls is None:
+        return False
+    stalls.saw(waited)
+    return stalls.lost
+
+
 def helper_default() -> bool:
     """Whether colliders share their queries with a helper thread unless told (the environment's
     TRYON_QUERY_HELPER=0 turns it off: a machine running as many try-ons at once as it has cores
