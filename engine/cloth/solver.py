@@ -45,7 +45,10 @@ class FireRelaxer:
     fast ones (measured on the dress: the hem crept down at ~1 cm/s for 2 s of draping). The
     time step stays at the eq. 4 bound (FIRE's growing step is left out); the half step back is
     what keeps that stable: zeroed velocities alone make each restart a gradient step, which at
-    the eq. 4 step grows the stiffest modes (tests/test_cloth.py)."""
+    the eq. 4 step grows the stiffest modes (tests/test_cloth.py). The power is the whole
+    cloth's: zeroing, as well, each vertex whose own f.v is negative (a local swing; QuickMin-like)
+    held the cloth back from sliding into place -- measured on the catalogue's five garments in M
+    on default:female and default:male, 305k iterations instead of 28.5k, five not settled."""
 
     def __init__(self, alpha: float = 0.1, decay: float = 0.99, delay: int = 5):
         self.alpha0, self.decay, self.delay = alpha, decay, delay

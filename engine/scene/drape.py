@@ -52,7 +52,12 @@ class DrapeOptions:
     weld_gap: float | None = None  # m: a seam pair this close is welded (None: half a cloth edge;
     # at one edge the last welds snapped pairs 11-13 mm apart together)
     sew_tau: float = 0.02  # s: a seam pair is pulled to close its gap in this time ...
-    sew_vmax: float = 3.0  # m/s: ... at most this fast
+    sew_vmax: float = 3.0  # m/s: ... at most this fast. The cap is what binds (default:female's M
+    # dress: 19 -> 1.6 cm in 0.14 s; tau 0.01 alone: 7 % fewer sewing iterations). Measured on
+    # 2026-12-04, tau 0.005 and 10 m/s over the catalogue's five garments in M on default:female
+    # and default:male: sewing 2,376 iterations instead of 5,288, but the ten drapes 26,950 in
+    # all instead of 28,497 (-5 %): the drapes after it from -32 % to +81 % (default:male's shirt
+    # 2,046 -> 3,696), more sharp folds on the dress (8 instead of 4)
     far_retry_vmax: float = 1.5  # m/s: flat panels (far_gap) whose seams stopped closing are sewn once
     # more from their placement, pulled at most this fast (0: not). Measured on GarmentCode's own
     # T-shirt (shirt_mean, its repository's assets) on the sample body it is laid out round: at
