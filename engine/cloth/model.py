@@ -219,10 +219,19 @@ class ClothState:
         return ClothState(self.x.copy(), self.v.copy())
 
 
+def _pair_keys(pairs: np.ndarray) -> np.ndarray:
+    """(P,) int64 keys of (P, 2) pairs of indices >= 0, in the pairs' lexicographic order: np.unique
+    of the keys is np.unique(pairs, axis=0) (same order, same first indices), without its slow
+    row-wise sort (measured: 27 of the 49 ms the dress's two models took)."""
+    p = pairs.astype(np.int64)
+    return p[:, 0] * (int(p.max(initial=0)) + 1) + p[:, 1]
+
+
 def _unique_pairs(pairs: np.ndarray) -> np.ndarray:
     p = np.sort(pairs, axis=1)
     p = p[p[:, 0] != p[:, 1]]
-    return np.unique(p, axis=0)
+    _, first = np.unique(_pair_keys(p), return_index=True)
+    return p[first]
 
 
 def _pairs_in(pairs: np.ndarray, among: np.ndarray) -> np.ndarray:
@@ -434,7 +443,7 @@ def weld_model(model: ClothModel, vertex_map: np.ndarray, uv: np.ndarray | None 
     keep = s[:, 0] != s[:, 1]
     s, rest, k, kind = s[keep], model.rest[keep], model.stiffness[keep], model.kind[keep]
     key = np.sort(s, axis=1)
-    _, first, group = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    _, first, group = np.unique(_pair_keys(key), return_index=True, return_inverse=True)
     # a spring on both sides of a seam keeps the longer rest length: where the two stitched edges
     # differ in length (eased in, up to the 10 % the validation allows), the shorter rest would
     # hold the seam at the short edge's length and leave the long side's springs along the seam
@@ -447,7 +456,7 @@ def weld_model(model: ClothModel, vertex_map: np.ndarray, uv: np.ndarray | None 
     if uv is not None and len(model.seams):
         fs, fr = seam_flexion(uv, model.springs, model.kind, model.rest, model.seams)
         fs = np.sort(vertex_map[fs], axis=1)
-        _, new = np.unique(fs, axis=0, return_index=True)  # one per welded pair, none doubling a spring
+        _, new = np.unique(_pair_keys(fs), return_index=True)  # one per welded pair, none doubling a spring
         new = np.sort(new)
         new = new[(fs[new, 0] != fs[new, 1]) & ~_pairs_in(fs[new], np.sort(s, axis=1))]
         if len(new):

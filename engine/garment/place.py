@@ -113,10 +113,16 @@ _TH = np.linspace(-np.pi, np.pi, 721)
 
 def _ellipse_arc(a: float, b: float) -> np.ndarray:
     """Arc length from theta = 0 at each angle of _TH on the ellipse (a along x, b along z)."""
-    pts = np.stack([a * np.sin(_TH), b * np.cos(_TH)], axis=1)
-    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-    arc = np.concatenate([[0.0], np.cumsum(seg)])
-    arc -= np.interp(0.0, _TH, arc)
+    return _ellipse_arcs(np.array([a]), np.array([b]))[0]
+
+
+def _ellipse_arcs(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """_ellipse_arc of each ellipse (a[i], b[i]) at once: (len(a), len(_TH))."""
+    px, pz = a[:, None] * np.sin(_TH)[None, :], b[:, None] * np.cos(_TH)[None, :]
+    dx, dz = px[:, 1:] - px[:, :-1], pz[:, 1:] - pz[:, :-1]
+    seg = np.sqrt(dx * dx + dz * dz)
+    arc = np.concatenate([np.zeros((len(a), 1)), np.cumsum(seg, axis=1)], axis=1)
+    arc -= np.array([np.interp(0.0, _TH, row) for row in arc])[:, None]
     return arc
 
 
@@ -156,13 +162,15 @@ def wrap_torso(uv: np.ndarray, hint: PanelHint, sections: BodySections, top_y: f
     sign = 1.0 if hint.side == "front" else -1.0
     rows = np.arange(int(np.floor(v.min() / ROW)), int(np.floor(v.max() / ROW)) + 2)  # rows[-2] * ROW <= v.max()
     ell = np.zeros((len(rows), 4))  # cx, cz, a, b of each row
-    for j, r in enumerate(rows):
-        yr = top_y + r * ROW
-        if clamp_y is not None:
-            yr = min(yr, clamp_y)
-        cx, cz, a, b, kc = sections.at(np.array([yr]), grown=True)[0]
+    yr = top_y + rows * ROW
+    if clamp_y is not None:
+        yr = np.minimum(yr, clamp_y)
+    cuts = sections.at(yr, grown=True)
+    widths = _widths_at(outline, np.clip(rows * ROW, v.min(), v.max()))
+    for j in range(len(rows)):
+        cx, cz, a, b, kc = cuts[j]
         a, b = a + CLEARANCE, b + CLEARANCE
-        width = _width_at(outline, float(np.clip(r * ROW, v.min(), v.max())))
+        width = widths[j]
         half = _half_perimeter(a, b)
         # kc > 1 only for covering sections: a tighter garment shrinks them back toward the box
         # ellipse (halfway, in ratio) so that its side seams start (nearly) closed
@@ -179,13 +187,13 @@ def wrap_torso(uv: np.ndarray, hint: PanelHint, sections: BodySections, top_y: f
     w = np.clip(f - j0, 0.0, 1.0)
     out = np.zeros((len(uv), 3))
     facing = np.zeros(len(uv))  # cos of the angle round the ellipse: 1 facing front/back, 0 at the sides
-    arcs: dict[int, np.ndarray] = {}  # each row's ellipse serves the bands above and below it
-    for j in np.unique(j0):
-        sel = j0 == j
+    arcs = _ellipse_arcs(ell[:, 2], ell[:, 3])  # each row's ellipse serves the bands above and below it
+    order = np.argsort(j0, kind="stable")  # the points band by band, each band in the points' order
+    bands, starts = np.unique(j0[order], return_index=True)
+    for j, lo, hi in zip(bands, starts, [*starts[1:], len(order)]):
+        sel = order[lo:hi]
         for jj, wj in ((j, 1.0 - w), (j + 1, w)):
             cx, cz, a, b = ell[jj]
-            if jj not in arcs:
-                arcs[jj] = _ellipse_arc(a, b)
             sn, cs = _ellipse_point(a, b, u[sel], arcs[jj])
             out[sel, 0] += wj[sel] * (cx + a * sn)
             out[sel, 2] += wj[sel] * (cz + sign * b * cs)
@@ -259,15 +267,17 @@ def _limit_slope(a: np.ndarray, step: float) -> np.ndarray:
     return a
 
 
-def _width_at(outline: np.ndarray, v: float) -> float:
-    """Width of a closed outline (M, 2) along the horizontal line at height v."""
+def _widths_at(outline: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Widths of a closed outline (M, 2) along the horizontal lines at heights v (K,): (K,)."""
     a, b = outline, np.roll(outline, -1, axis=0)
-    cross = (a[:, 1] - v) * (b[:, 1] - v) <= 0
-    if not cross.any():
-        return float(np.ptp(outline[:, 0]))
-    t = np.clip((v - a[cross, 1]) / np.where(b[cross, 1] != a[cross, 1], b[cross, 1] - a[cross, 1], 1.0), 0, 1)
-    xs = a[cross, 0] + t * (b[cross, 0] - a[cross, 0])
-    return float(xs.max() - xs.min())
+    vv = v[:, None]
+    cross = (a[None, :, 1] - vv) * (b[None, :, 1] - vv) <= 0  # (K, M): edges each line meets
+    rise = np.where(b[:, 1] != a[:, 1], b[:, 1] - a[:, 1], 1.0)
+    t = np.clip((vv - a[None, :, 1]) / rise[None, :], 0, 1)
+    xs = a[None, :, 0] + t * (b[None, :, 0] - a[None, :, 0])
+    hit = cross.any(axis=1)
+    wide = np.where(cross, xs, -np.inf).max(axis=1) - np.where(cross, xs, np.inf).min(axis=1)
+    return np.where(hit, wide, np.ptp(outline[:, 0]))
 
 
 def arm_path(points: np.ndarray, step: float = 0.005, smooth: float = 0.06) -> np.ndarray:
@@ -450,30 +460,38 @@ def wrap_trousers(uv: np.ndarray, side: str, leg: int, top_y: float, crotch_y: f
     rows = np.round(v / 0.01).astype(int)
     p_t = np.zeros((len(uv), 3))
     p_l = np.zeros((len(uv), 3))
-    for r in np.unique(rows):
-        sel = rows == r
-        vr = r * 0.01
-        yr = top_y + vr
-        # torso
-        # a garment tighter than the covering ellipse shrinks it (at most back to the cut's box
-        # ellipse), so its seams start closed: a waist whose side seams start open slides down
-        cx, cz, a, b, kc = torso.at(np.array([max(yr, crotch_y)]), grown=True)[0]
+    order = np.argsort(rows, kind="stable")  # the points row by row, each row in the points' order
+    uniq, starts = np.unique(rows[order], return_index=True)
+    vr = uniq * 0.01
+    yr = top_y + vr
+    # the torso's and the leg's ellipse of each row
+    # (a garment tighter than the covering ellipse shrinks it -- at most back to the cut's box
+    # ellipse -- so its seams start closed: a waist whose side seams start open slides down)
+    t_cut, l_cut = torso.at(np.maximum(yr, crotch_y), grown=True), legs.at(np.minimum(yr, crotch_y), leg)
+    t_ell, l_ell = np.zeros((len(uniq), 4)), np.zeros((len(uniq), 4))
+    for i in range(len(uniq)):
+        cx, cz, a, b, kc = t_cut[i]
         a, b = a + CLEARANCE, b + CLEARANCE
-        k = max(1.0 / kc, half_girth(vr) / _half_perimeter(a, b))
-        a, b = a * k, b * k
+        k = max(1.0 / kc, half_girth(vr[i]) / _half_perimeter(a, b))
+        t_ell[i] = cx, cz, a * k, b * k
+        cx, cz, a, b, kc = l_cut[i]
+        a, b = a + CLEARANCE, b + CLEARANCE
+        k = max(1.0 / kc, leg_girth(min(vr[i], crotch_y - top_y)) / (2 * _half_perimeter(a, b)))
+        l_ell[i] = cx, cz, a * k, b * k
+    t_arcs, l_arcs = _ellipse_arcs(t_ell[:, 2], t_ell[:, 3]), _ellipse_arcs(l_ell[:, 2], l_ell[:, 3])
+    for i, (lo, hi) in enumerate(zip(starts, [*starts[1:], len(order)])):
+        sel = order[lo:hi]
+        # torso
+        cx, cz, a, b = t_ell[i]
         t = leg * u[sel]  # toward the outseam; < 0 in the crotch extension
-        sn, cs = _ellipse_point(a, b, leg * np.maximum(t, 0.0))
+        sn, cs = _ellipse_point(a, b, leg * np.maximum(t, 0.0), t_arcs[i])
         stand = 0.5 * np.maximum(-t, 0.0)
         p_t[sel, 0] = cx + (a + stand) * sn
         p_t[sel, 1] = y[sel]
         p_t[sel, 2] = cz + sg * (b + stand) * cs
         # leg
-        yl = min(yr, crotch_y)
-        cx, cz, a, b, kc = legs.at(np.array([yl]), leg)[0]
-        a, b = a + CLEARANCE, b + CLEARANCE
-        k = max(1.0 / kc, leg_girth(min(vr, crotch_y - top_y)) / (2 * _half_perimeter(a, b)))
-        a, b = a * k, b * k
-        sn, cs = _ellipse_point(a, b, u[sel] - crease)
+        cx, cz, a, b = l_ell[i]
+        sn, cs = _ellipse_point(a, b, u[sel] - crease, l_arcs[i])
         p_l[sel, 0] = cx + a * sn
         p_l[sel, 1] = y[sel]
         p_l[sel, 2] = cz + sg * b * cs
