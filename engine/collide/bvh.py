@@ -46,7 +46,7 @@ _BARY_EPS = 1e-9     # barycentric below this: the closest point is on the edge/
 # --------------------------------------------------------------------------------------------
 # build / refit
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _tri_boxes(verts, faces, lo, hi):
     for f in range(faces.shape[0]):
         for k in range(3):
@@ -57,7 +57,7 @@ def _tri_boxes(verts, faces, lo, hi):
             hi[f, k] = max(a, max(b, c))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _build(tlo, thi, leaf_size):
     """Binned-SAH build over triangle boxes (F, 3). Returns (node_lo, node_hi, node_a, node_n,
     prim), trimmed to the nodes used. Iterative (explicit stack): degenerate inputs cannot blow
@@ -189,7 +189,7 @@ def _build(tlo, thi, leaf_size):
         node_n[:used].copy(), prim
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _tree_depth(node_a, node_n):
     # children have larger indices than parents: one forward sweep assigns every depth
     depth = np.zeros(node_a.shape[0], np.int64)
@@ -231,7 +231,7 @@ def _refit(tlo, thi, node_lo, node_hi, node_a, node_n, prim):
                 node_hi[i, k] = max(node_hi[a, k], node_hi[a + 1, k])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _normals(verts, faces, edge_id, n_edges, face_n, edge_n, vert_n):
     """Face normals (F,3) unit; edge pseudonormals per face-edge (F,3,3): edge e of face f runs
     faces[f,e] -> faces[f,(e+1)%3] and gets the sum of the unit normals of the faces sharing it
@@ -359,7 +359,7 @@ def _box_d2(px, py, pz, node_lo, node_hi, i):
     return tx * tx + ty * ty + tz * tz
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _gather_tris(verts, faces, prim, tri_xyz):
     # leaf order: corners, then the triangle's box (lo, hi); a leaf reads one contiguous block
     # instead of faces -> verts hops

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -96,6 +97,11 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
         raise InputError(f"unknown velocity modification '{o.params.velocity_mode}'; "
                          f"choose one of: {', '.join(VM_MODES)}")
     t_all = time.perf_counter()
+    # the body's BVH for the exact penetration figures at the end, built on the other core while
+    # this thread meshes and places the panels and renders the maps (its kernels release the GIL)
+    bvh_pool = ThreadPoolExecutor(1, thread_name_prefix="body-bvh")
+    bvh_job = bvh_pool.submit(MeshBVH, loaded.vertices, loaded.faces)
+    bvh_pool.shutdown(wait=False)
     progress("meshing", 0.0, "meshing the panels")
     placement_note = None
     pattern_file = place is None  # a pattern file's placement (its own, or carried by landmarks)
@@ -127,6 +133,7 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
             if not shown[0] and bv is None:
                 bv, shown[0] = lift.raised.vertices, True
             watch(stage, x, tri, bv)
+    bvh = bvh_job.result()  # (done before the solver and its query helper thread start)
     try:
         res = sew_and_drape(garment, collider, o, progress, observer=observer)
     except SimulationError as e:
@@ -143,7 +150,6 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
         res = lower_arms(lift, res, o, texel=texel, window=plan_l.window, segments=plan_l.segments,
                          progress=progress, observer=observer)
         body = loaded
-    bvh = MeshBVH(body.vertices, body.faces)
     pen = penetration_stats(body.vertices, body.faces, res.positions, bvh=bvh)
     iters = sum(res.iterations.values())
     tc, tk = res.timing["cloth_total"], res.timing["collision_total"]
