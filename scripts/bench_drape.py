@@ -101,7 +101,7 @@ def main() -> None:
         print(f"| {name} | {h * 100:.2f} | {rep['cloth_vertices']} | {rep['iterations']} | "
               f"{rep['wall_seconds']['sewing'] + rep['wall_seconds']['draping']:.2f} | {ms['total']:.3f} | {ms['cloth']:.3f} | {ms['collision']:.3f} | "
               f"{rep['settled']} | {rep['penetration_mm']['max']:.1f} | {100 * rep['strain']['max']:.1f} | "
-              f"{rep['wall_seconds']['total']:.1f} | {s} | "
+              f"{rep['wall_seconds']['total']:.2f} | {s} | "
               f"{speedup} |")
 
 
