@@ -87,6 +87,10 @@ class ClothParams:
     # stretch springs (cotton at 1.5 cm: 0.044 against 327 N/m), so their force changes little in
     # a few steps of the stretch springs' eq. 4 bound, and they are a third of the springs
     requery_move: float = 0.001  # m: the maps are asked again once a checked point moved this far ...
+    # (2 mm while sewing only, measured 2026-12-04 on the catalogue's ten drapes in M: sewing asked
+    # 5.3 instead of 9.0 million rows, its wall time -22 %, but the drapes after it took 1.08 x the
+    # iterations, bench_ab --settle 3 at 2 cm -- within that comparison's +-15 % spread, so no
+    # gain could be shown; left at 1 mm)
     requery_every: int = 8  # ... or after this many steps (between queries the answers are carried)
     guard_step: float = 0.0003  # m: the strain guard shortens a spring by at most this per pass
     # (of vm_passes). Projected at once, cloth torn over a body part (a dress sewn without the arm

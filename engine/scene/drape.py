@@ -99,10 +99,12 @@ class DrapeOptions:
     # default:female and default:male (drape iterations, all ten; every seam, strain and
     # penetration bar still met): viscous ~125k (the dress's hem crept down at ~1 cm/s for 2 s),
     # FIRE 28.5k at fire_damping 100 (34.4k with 0.1 s settle windows), 37.2k at 20 (0.1 s windows)
-    fire_damping: float = 100.0  # x the viscous damping while draping with FIRE
+    fire_damping: float = 100.0  # x the viscous damping while draping with FIRE (200: 1.05 x the
+    # iterations, bench_ab --settle 3 at 2 cm, 2026-12-04; within that comparison's spread)
     fire_ramp: float = 0.05  # s: with FIRE, the drape brings gravity from where sewing left it to g
     # over at most this long (FIRE takes the jolt out; at 0.3 the skirt ended 17 mm lower at the
-    # hips, another rest on the same body, for 800 more iterations)
+    # hips, another rest on the same body, for 800 more iterations; at 0.02, 1.06 x the iterations,
+    # bench_ab --settle 3 at 2 cm, 2026-12-04)
     gravity_ramp: float = 0.3  # s: gravity grows from 0 to g over this long (no jolt when it starts)
     sew_budget: float = 4.0  # s of simulated time
     snap_gap: float = 0.02  # m: when, after snap_after of sewing, the open seams have stopped
