@@ -188,10 +188,7 @@ def wrap_torso(uv: np.ndarray, hint: PanelHint, sections: BodySections, top_y: f
     out = np.zeros((len(uv), 3))
     facing = np.zeros(len(uv))  # cos of the angle round the ellipse: 1 facing front/back, 0 at the sides
     arcs = _ellipse_arcs(ell[:, 2], ell[:, 3])  # each row's ellipse serves the bands above and below it
-    order = np.argsort(j0, kind="stable")  # the points band by band, each band in the points' order
-    bands, starts = np.unique(j0[order], return_index=True)
-    for j, lo, hi in zip(bands, starts, [*starts[1:], len(order)]):
-        sel = order[lo:hi]
+    for j, sel in _groups(j0):
         for jj, wj in ((j, 1.0 - w), (j + 1, w)):
             cx, cz, a, b = ell[jj]
             sn, cs = _ellipse_point(a, b, u[sel], arcs[jj])
@@ -265,6 +262,14 @@ def _limit_slope(a: np.ndarray, step: float) -> np.ndarray:
     for j in range(1, len(a)):  # ... and upward from the bottom
         a[j] = np.maximum(a[j], a[j - 1] - step)
     return a
+
+
+def _groups(keys: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """(key, indices of the points with that key, in the points' order) for each distinct key,
+    ascending: one stable sort instead of a mask over all points per key."""
+    order = np.argsort(keys, kind="stable")
+    uniq, starts = np.unique(keys[order], return_index=True)
+    return [(k, order[lo:hi]) for k, lo, hi in zip(uniq, starts, [*starts[1:], len(order)])]
 
 
 def _widths_at(outline: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -460,8 +465,8 @@ def wrap_trousers(uv: np.ndarray, side: str, leg: int, top_y: float, crotch_y: f
     rows = np.round(v / 0.01).astype(int)
     p_t = np.zeros((len(uv), 3))
     p_l = np.zeros((len(uv), 3))
-    order = np.argsort(rows, kind="stable")  # the points row by row, each row in the points' order
-    uniq, starts = np.unique(rows[order], return_index=True)
+    groups = _groups(rows)
+    uniq = np.array([r for r, _ in groups])
     vr = uniq * 0.01
     yr = top_y + vr
     # the torso's and the leg's ellipse of each row
@@ -479,8 +484,7 @@ def wrap_trousers(uv: np.ndarray, side: str, leg: int, top_y: float, crotch_y: f
         k = max(1.0 / kc, leg_girth(min(vr[i], crotch_y - top_y)) / (2 * _half_perimeter(a, b)))
         l_ell[i] = cx, cz, a * k, b * k
     t_arcs, l_arcs = _ellipse_arcs(t_ell[:, 2], t_ell[:, 3]), _ellipse_arcs(l_ell[:, 2], l_ell[:, 3])
-    for i, (lo, hi) in enumerate(zip(starts, [*starts[1:], len(order)])):
-        sel = order[lo:hi]
+    for i, (_, sel) in enumerate(groups):
         # torso
         cx, cz, a, b = t_ell[i]
         t = leg * u[sel]  # toward the outseam; < 0 in the crotch extension
