@@ -643,3 +643,35 @@ def test_a_pattern_too_small_is_told_to_grade_it_not_to_pick_a_size():
         err.too_small = True
         add_size_hint(err, str(SAMPLE_SKIRT), body, None)
         assert "grade it larger" in str(err) and "larger size" not in str(err), str(err)
+
+
+def test_collisions_are_checked_as_often_as_the_cloth_moves_far_enough():
+    """Sewing checks the body every floor(sew_check_travel / (pull cap x dt)) steps (at most 3),
+    draping every floor(drape_check_time / dt) (at most 2): at the default 1.5 cm cloth 3 and 2,
+    at 3 cm (twice the eq. 4 step) every step; DrapeOptions.collide_every sets both; the report
+    says what was used, and a drape at 1.5 cm checked that way meets the quality bars."""
+    from engine.body.default import default_body
+    from engine.errors import InputError
+    from engine.scene.drape import DrapeOptions, _check_options, _drape_every, _sew_every
+    from engine.scene.garments import resolve_garment
+    from engine.scene.tryon import run_tryon
+
+    o = DrapeOptions()
+    assert (_sew_every(o, 0.147e-3, o.sew_vmax), _drape_every(o, 0.147e-3)) == (3, 2)
+    assert (_sew_every(o, 0.3e-3, o.sew_vmax), _drape_every(o, 0.3e-3)) == (1, 1)
+    assert _sew_every(o, 0.147e-3, 1.5) == 3  # a gentler pull: no more than SEW_CHECK_MAX apart
+    every = DrapeOptions(collide_every=1)
+    assert (_sew_every(every, 0.147e-3, 3.0), _drape_every(every, 0.147e-3)) == (1, 1)
+    for bad, what in ((DrapeOptions(collide_every=0), "collide_every 0"),
+                      (DrapeOptions(sew_check_travel=-1.0), "sew_check_travel"),
+                      (DrapeOptions(drape_check_time=0.0), "drape_check_time")):
+        with pytest.raises(InputError, match=what):
+            _check_options(bad)
+
+    body = default_body("female")
+    spec, place, name = resolve_garment("skirt", body, "M")
+    _, rep = run_tryon(body, spec, place=place, source=name)
+    assert rep["collision_every_steps"] == {"sewing": 3, "draping": 2}, rep["collision_every_steps"]
+    _check_quality(rep)
+    _, coarse = run_tryon(body, spec, h=0.03, place=place, source=name)
+    assert coarse["collision_every_steps"] == {"sewing": 1, "draping": 1}, coarse["collision_every_steps"]

@@ -78,9 +78,9 @@ class ClothParams:
     # max 0.0 mm; 2 rounds 33.9k, 5.91 %, 0.2 mm (p99 0), sharp folds alike, and 0.89 x the time
     # an iteration (dress, 1.63 cm, 3 interleaved rounds); 1 round 39.6k, 6.06 % (bar: 6 %)
     collide_every: float = 1  # steps between collision checks (see ClothSolver.step; a fraction:
-    # that many apart on average, ClothSolver._check_now). The drape checks
-    # every step: measured, every 2 or 4 steps left the shirt at 6.1-6.3 % strain (limit
-    # 6 %); walking checks every 4 (engine.scene.walk.WalkOptions)
+    # that many apart on average, ClothSolver._check_now). The drape sets its own per stage
+    # (engine.scene.drape.DrapeOptions.collide_every: sewing every 3 at 1.5 cm, draping every 2);
+    # walking as often as the body's travel asks (engine.scene.walk.WalkOptions)
     recover: float = 0.002  # s: a spring's excess over the strain limit is worked off over this long
     flexion_every: int = 4  # steps between evaluations of the flexion springs' forces, held in
     # between (engine.cloth.kernels.eval_forces_and_integrate). They are ~7,500 x softer than the

@@ -123,6 +123,7 @@ class ClothSolver:
         self._saved_list = np.zeros(n, dtype=np.int32)
         self._guard_lim2 = (None, None)  # (threshold, squared lengths the guard looks past, run order)
         self.recover = p.recover  # ... and the strain recovery (it would fight the seam pull)
+        self.collide_every = p.collide_every  # steps between collision checks (the drape sets it per stage)
         self.sewing = None  # (pairs, welded, tau, vmax) while sewing: see engine.cloth.welds
         self._q, self._q_age, self._q_version = None, 0, None  # the last map answer (see _contacts)
         self._schedule = None  # a fractional collide_every's check schedule (_check_now)
@@ -157,6 +158,7 @@ class ClothSolver:
         if "runs" not in model.__dict__:  # same springs: the force pass's order (a cached_property)
             model.__dict__["runs"] = old.runs
         self.model, self.dt = model, float(dt)
+        self.collide_every = model.params.collide_every
         self._sprops = self._spring_props(model)
         self._guard_lim2 = (None, None)
 
@@ -190,7 +192,7 @@ class ClothSolver:
         # `collide_every` steps, the points predicted that many steps ahead; in between the
         # reaction force (eq. 16, in the force pass) keeps contacts from pressing in, and
         # hold_contacts keeps the strain limit and the seams from moving them in
-        ahead = self._check_now(p.collide_every) if self.collider is not None else 0
+        ahead = self._check_now(self.collide_every) if self.collider is not None else 0
         if ahead:
             K.collision_points(state.x, state.v, dt * ahead, m.quads, m.tris, self.points)
             status, normal, bvel, depth = self._contacts()
@@ -234,7 +236,7 @@ class ClothSolver:
         from here (x + v dt over the steps until then and the steps that check looks ahead), at
         the body's time of that check -- in the background, while the steps in between run
         (engine.collide.moving.TrackCollider.prefetch)."""
-        nxt = self._next_check(self.model.params.collide_every)
+        nxt = self._next_check(self.collide_every)
         if nxt is None:
             return
         c, ahead = nxt

@@ -171,6 +171,8 @@ def lower_arms(lift: ArmLift, res: DrapeResult, options: DrapeOptions, *, texel:
                           "cloth_total": res.timing["cloth_total"] + walk_cloth_s + settle_cloth,
                           "collision_total": res.timing["collision_total"] + walk_coll_s + settle_coll},
                   seam_gap_max=res.seam_gap_max, snapped=res.snapped, spec=res.spec,
+                  collide_every={**res.collide_every, "lowering_arms": w["collision_every_steps"],
+                                 "settling": settled.collide_every["draping"]},
                   lowering={"strain_max": float(w["strain_max"]), "penetration_mm": w["penetration_mm"],
                             "frames": int(w["frames"])})
     return out

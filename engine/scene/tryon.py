@@ -172,6 +172,9 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
         "iterations": int(iters),
         "iterations_by_stage": res.iterations,
         "dt_ms": res.dt * 1000, "dt_bound_ms": res.model.dt_bound * 1000,
+        # collisions are checked every this many steps (DrapeOptions.collide_every), so a
+        # collision ms per iteration is that of an average step, not of a step that checks
+        "collision_every_steps": res.collide_every,
         "ms_per_iteration": {"cloth": 1000 * tc / max(iters, 1), "collision": 1000 * tk / max(iters, 1),
                              "total": 1000 * (tc + tk) / max(iters, 1)},
         "wall_seconds": {"maps": t_maps, **{k: v for k, v in res.timing.items() if not k.endswith("_total")},
