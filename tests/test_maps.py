@@ -260,6 +260,17 @@ def test_rows_shared_with_a_helper_thread_answer_as_one_thread_does(sphere_maps)
                 assert np.array_equal(g, w)
         assert np.any(got[0][0] == 2) and np.any(got[0][0] == 0)
         ctl = cols[0].server.ctl
+        # who takes which chunk is a race: on a loaded machine (CI's other test process) the
+        # caller's thread can lose all of 30 (seen once: 401 chunks to the server, 0 to the
+        # caller), so ask on, the same check each time, until both threads have answered some
+        for _ in range(300):
+            if ctl[SERVER_CHUNKS] > 0 and ctl[SOLVER_CHUNKS] > 0:
+                break
+            x = pts + rng.normal(0.0, 0.002, pts.shape)
+            rows[:5999] = np.sort(rng.choice(len(pts), 5999, replace=False))
+            got = [[a.copy() for a in c.query_rows(x, rows, 5999)] for c in cols]
+            for g, w in zip(*got):
+                assert np.array_equal(g, w)
         assert ctl[SERVER_CHUNKS] > 0 and ctl[SOLVER_CHUNKS] > 0
         assert cols[1].server is None and cols[0].stats["shared_rows"] > 0 == cols[1].stats["shared_rows"]
         assert any(t.name == "map-query-server" for t in threading.enumerate())
