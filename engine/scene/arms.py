@@ -155,7 +155,11 @@ def lower_arms(lift: ArmLift, res: DrapeResult, options: DrapeOptions, *, texel:
             progress("settling", 0.0, "relaxing the cloth after lowering the arms")
     t_relax = time.perf_counter() - t0
     try:
-        settled = drape(res.model, state, collider, o, lambda s, f, m: progress("settling", f, m), observer,
+        # the cloth lies pressed between the lowered arms and the torso: checked at every step
+        # (measured, every 2nd step while the strain stayed under threshold + 1 %: 3.7 mm into
+        # the body where 3 are allowed; DrapeOptions.tight_every_step)
+        every = o if o.collide_every is not None else replace(o, collide_every=1)
+        settled = drape(res.model, state, collider, every, lambda s, f, m: progress("settling", f, m), observer,
                         gravity_from=1.0, solver=solver)
     finally:
         collider.release()  # (its query helper thread)
