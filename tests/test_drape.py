@@ -649,7 +649,8 @@ def test_collisions_are_checked_as_often_as_the_cloth_moves_far_enough():
     """Sewing checks the body every floor(sew_check_travel / (pull cap x dt)) steps (at most 3),
     draping every floor(drape_check_time / dt) (at most 2): at the default 1.5 cm cloth 3 and 2,
     at 3 cm (twice the eq. 4 step) every step; DrapeOptions.collide_every sets both; the report
-    says what was used, and a drape at 1.5 cm checked that way meets the quality bars."""
+    says what was used, and a drape at 1.5 cm checked that way meets the quality bars. A drape
+    stretched past threshold + tight_every_step checks every step from then on."""
     from engine.body.default import default_body
     from engine.errors import InputError
     from engine.scene.drape import DrapeOptions, _check_options, _drape_every, _sew_every
@@ -675,3 +676,10 @@ def test_collisions_are_checked_as_often_as_the_cloth_moves_far_enough():
     _check_quality(rep)
     _, coarse = run_tryon(body, spec, h=0.03, place=place, source=name)
     assert coarse["collision_every_steps"] == {"sewing": 1, "draping": 1}, coarse["collision_every_steps"]
+    # stretched past the bar (here lowered to the threshold itself: the skirt drapes at 5-6 %),
+    # draping goes back to a check at every step at the first strain check after TIGHT_GRACE
+    from engine.scene.drape import TIGHT_GRACE
+
+    _, tight = run_tryon(body, spec, place=place, source=name, options=DrapeOptions(tight_every_step=0.0))
+    ce = tight["collision_every_steps"]
+    assert ce["draping"] == 2 and TIGHT_GRACE < ce["every_step_from_s"] <= TIGHT_GRACE + 0.0105, ce
