@@ -126,6 +126,39 @@ def test_track_collider_reuses_maps_of_a_periodic_track():
         r.release()
 
 
+def test_prerendered_maps_are_each_frames_kept_maps():
+    """prerender(last) renders every distinct frame up to `last` once, in the helper thread,
+    keeping float16 copies only; the walk's frames then render nothing and use the frame's own
+    maps (as float16 expanded), whether in order or after a jump."""
+    from engine.collide.maps import MapRenderer
+    from engine.collide.moving import TrackCollider
+
+    track = _sliding_box_track(0.5, frames=4)
+    track.cycle_start, track.cycle_frames = 1, 3
+    col = TrackCollider(track, lambda: MapRenderer(track.body.faces, texel=0.005, tol=0.005, window=(0.0, 0.5),
+                                                   with_velocity=True, own_context=True), tol=0.005, ahead=True)
+    ref, r = _collider(track)
+    seen = []
+    try:
+        took = col.prerender(11, lambda k, n: seen.append((k, n)))
+        assert took > 0 and seen == [(1, 4), (2, 4), (3, 4), (4, 4)] and col.stats["renders"] == 4
+        assert all(kept[0].surf is None for kept in col._kept.values())  # float16 copies only
+        for i in list(range(12)) + [3, 9]:
+            col.set_time(i / track.fps)
+            ref.set_time(i / track.fps)
+            col.query(np.zeros((1, 3)))
+            for a, b in ((col.maps.surf, ref.maps.surf), (col.maps.vel, ref.maps.vel),
+                         (col.maps.depth_pairs, ref.maps.depth_pairs)):
+                assert np.array_equal(a, b.astype(np.float16).astype(np.float32), equal_nan=True), i
+        assert col.stats["renders"] == 4 and col.stats["reuses"] == 13  # every switch (a revisit of the frame in use is none)
+    finally:
+        col.release()
+        r.release()
+    unkept = TrackCollider(track, None, tol=0.005, keep=False)
+    with pytest.raises(ValueError, match="not kept"):
+        unkept.prerender(3)
+
+
 def test_kept_maps_expanded_ahead_are_the_frames_maps():
     """Rendered ahead in a helper thread, a periodic track's kept frames are expanded (float32
     maps and depth pairs) into the spare buffers while the present frame is in use: at every
@@ -319,6 +352,9 @@ def test_walk_report_fields(walked):
     assert report["realtime_factor"] > 0
     assert any("periodic" in line for line in report["left_out"])
     assert report["walk"]["map_frames_rendered"] <= 15 + 40  # the ramp and at most a cycle
+    # ... all rendered before the walking stage (WalkOptions.prerender), not in its wall time
+    assert report["walk"]["map_prerender_seconds"] > 0
+    assert report["walk"]["wall_seconds"]["maps_before"] == report["walk"]["map_prerender_seconds"]
 
 
 def test_walk_outputs(walked, tmp_path):

@@ -363,14 +363,47 @@ class TrackCollider:
             maps, kept, took = fut.result()
         else:
             maps, kept, took = self._render(k)
+        self._count_render(k, maps, kept, took)
+        # (the float16 copies included; rendered ahead: only the wait for them)
+        self.stats["map_seconds"] += time.perf_counter() - t0
+        return self._with_depth_pairs(maps)
+
+    def _count_render(self, k: int, maps: CollisionMaps, kept, took: float) -> None:
         self.stats["renders"] += 1
         self.stats["render_seconds"] += took
         if kept is not None:
             self.stats["map_bytes"] += kept[1].nbytes + kept[2].nbytes + maps.kind.nbytes + maps.side_src.nbytes
             self._kept[k] = kept
-        # (the float16 copies included; rendered ahead: only the wait for them)
-        self.stats["map_seconds"] += time.perf_counter() - t0
-        return self._with_depth_pairs(maps)
+
+    def prerender(self, last: int, progress=None) -> float:
+        """Render now the maps of every distinct track frame of frames 0 .. last and keep them
+        (float16 when compact) -- a periodic walk's ramp and one cycle -- so that the walk
+        itself only expands kept copies (`keep` must be set). Rendered ahead, in the helper
+        thread (its GL context), else in this one; progress(done, total) after each. Returns
+        the seconds it took. (Measured on default:female's walk, 49 frames: 1.08 s rendered
+        alone, where rendering one frame ahead took 1.54 s of the helper thread's time and
+        slowed the walk's frames while it ran: 50-62 ms a frame against 35-51 ms after.)"""
+        if not self.keep:
+            raise ValueError("prerender: maps that are not kept would be rendered again")
+        t0 = time.perf_counter()
+        todo = []
+        for i in range(last + 1):
+            k = self.track.index(i)[0]
+            if k not in self._kept and k not in todo:
+                todo.append(k)
+        for n, k in enumerate(todo):
+            if self._pool is not None:
+                maps, kept, took = (self._pending.pop(k, None) or self._pool.submit(self._render, k)).result()
+            else:
+                maps, kept, took = self._render(k)
+            self._count_render(k, maps, kept, took)
+            if self.compact and k != self._k:  # keep the float16 copies only (expanded when used)
+                self._let_go(maps)
+            if progress is not None:
+                progress(n + 1, len(todo))
+        took = time.perf_counter() - t0
+        self.stats["prerender_seconds"] = self.stats.get("prerender_seconds", 0.0) + took
+        return took
 
     def _render(self, k: int):
         """Frame k's maps (and their kept copy): (maps, kept or None, seconds it took)."""

@@ -25,11 +25,13 @@ The strain peaks are a few springs for a few frames (the dress's armholes as an 
 the trousers' hips); with stiffening at threshold + 10 % the trousers went to x0.5 at frame 11
 (18.2 %) and then stayed at 7.3 % (median); the others never stiffened.
 
-The maps of each frame are rendered one frame ahead in a helper thread with its own GL context
-(WalkOptions.render_ahead; engine.collide.moving): the body's motion does not depend on the
-cloth, and the numba kernels release the GIL, so the render runs on the second core while the
-solver works; the solver waits only when a render is late (`ms_per_frame.maps` counts that wait,
-`walk.map_render_seconds` the renders). The maps are the same bit for bit (tests/test_walk.py).
+A periodic walk's maps (the ramp and one cycle) are rendered before the walking stage
+(WalkOptions.prerender; `map_prerender_seconds`), and the walk expands their float16 copies.
+Otherwise the maps of each frame are rendered one frame ahead in a helper thread with its own
+GL context (WalkOptions.render_ahead; engine.collide.moving): the body's motion does not depend
+on the cloth, and the numba kernels release the GIL, so the render runs on the second core while
+the solver works; the solver waits only when a render is late (`ms_per_frame.maps` counts that
+wait, `map_render_seconds` the renders). The maps are the same bit for bit (tests/test_walk.py).
 
 Each frame is checked: non-finite positions, runaway strain or cloth far from the body end the run
 with SimulationError (never an exploded garment written as a result).
@@ -109,6 +111,15 @@ class WalkOptions:
     # frame (the body's motion does not depend on the cloth); the solver waits only when they
     # are late. False: render when the frame comes up, in this thread.
     render_ahead: bool = True
+    # Maps kept for reuse (a periodic walk: the ramp and one cycle) are all rendered before the
+    # walking stage (TrackCollider.prerender; "walk maps" in progress, the report's
+    # map_prerender_seconds), with both cores free: the walking stage then only expands kept
+    # float16 copies, and each of its frames costs what a reused frame costs. Measured on the
+    # dress, 4 s (default:female, M): rendered one frame ahead, the first 49 frames took 50-62 ms
+    # each and the reused ones after them 35-51 ms (same runs); the 49 renders took 1.08 s up
+    # front against 1.54 s of the helper thread's time during the walk. False: render each
+    # frame's maps when it comes up (ahead, as render_ahead says).
+    prerender: bool = True
     collision: str = "image"  # or "object": the BVH baseline (engine.collide.moving.TrackObjectCollider)
     friction: float = 1.0  # x the fabric's cloth-body friction (engine.scene.arms lowers arms without it)
 
@@ -246,6 +257,11 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
         else:
             collider = TrackCollider(track, renderer, tol=tol, keep=track.periodic and o.reuse_maps)
     frame_time = 1.0 / track.fps
+    t_prerender = 0.0
+    if o.collision == "image" and o.prerender and collider.keep:
+        progress("walk maps", 0.0, "rendering the walk's collision maps")
+        t_prerender = collider.prerender(n_frames, lambda k, n: progress(
+            "walk maps", k / n, f"collision maps of frame {k}/{n} of the ramp and one cycle"))
 
     def walking_model(stiffness: float):
         """The drape's model at `stiffness` x its springs with the walk's solver settings; the
@@ -342,6 +358,8 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
         # the renders' own time (ms_per_frame.maps counts what the walk waited for: rendered ahead,
         # in a helper thread, only their lateness)
         "map_render_seconds": collider.stats.get("render_seconds", collider.stats["map_seconds"]),
+        # ... of them, those rendered before the walking stage (WalkOptions.prerender; not in its wall time)
+        "map_prerender_seconds": t_prerender,
         "maps_rendered_ahead": o.render_ahead and o.collision == "image",
         "map_memory_mb": collider.stats["map_bytes"] / 2 ** 20,
         # the collision queries' chunks answered by the query server's thread (the rest: the solver's)
@@ -350,7 +368,8 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
         "query_helper_let_go_at": collider.stats.get("helper_let_go_at"),
         "penetration_mm": {"max": pmax, "p99": p99},  # over all vertices of all frames
         "strain_max": max(f["strain_max"] for f in per_frame),
-        "wall_seconds": {"walking": wall_walk, "penetration_check": t_pen, "total": time.perf_counter() - t_all},
+        "wall_seconds": {"walking": wall_walk, "penetration_check": t_pen, "maps_before": t_prerender,
+                         "total": time.perf_counter() - t_all},
         "left_out": left,
         "per_frame": per_frame,
     }
