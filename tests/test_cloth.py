@@ -692,6 +692,25 @@ def test_collisions_every_few_steps_still_stop_a_falling_sheet(garment):
     assert abs(lowest[4] - lowest[1]) < 0.002 and abs(lowest[3.5] - lowest[1]) < 0.002
 
 
+@pytest.mark.parametrize("every", [1, 3, 2.5, 3.77])
+def test_checks_next_says_which_steps_ask_the_collider(garment, every):
+    """ClothSolver.checks_next() before a step is True exactly when that step asks the collider
+    (a walk puts its moving body at the step's time only then), whole or fractional spacing."""
+    col = _CountingCollider()
+    m = _model(garment)
+    s = ClothSolver(replace(m, params=replace(m.params, collide_every=every, requery_every=1)), col)
+    state = ClothState(garment.positions.copy() + (0.0, 0.3, 0.0), np.zeros_like(garment.positions))
+    said, asked = [], []
+    for _ in range(40):
+        said.append(s.checks_next())
+        before = col.calls
+        s.step(state)
+        asked.append(col.calls > before)
+    assert said == asked
+    assert 40 / every - 1 <= sum(asked) <= 40 / every + 1
+    assert not ClothSolver(m).checks_next()  # no collider: never
+
+
 def test_a_fractional_collide_every_checks_that_often_on_average(garment):
     """collide_every 2.5: checks at steps 0, 3, 5, 8, 10, ... (start + ceil(k x 2.5)), each
     predicting the points up to the next one; changing it starts a new schedule; a whole number

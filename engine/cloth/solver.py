@@ -257,6 +257,17 @@ class ClothSolver:
             return None
         return sched[3], sched[1] + math.ceil((sched[2] + 1) * e - 1e-9) - sched[3]
 
+    def checks_next(self) -> bool:
+        """Whether the next step() checks collisions (and so asks the collider): a moving
+        body's collider is put at the step's time only for those (engine.scene.walk)."""
+        if self.collider is None:
+            return False
+        e = float(self.collide_every)
+        if e.is_integer():
+            return self.iterations % int(e) == 0
+        sched = self._schedule
+        return sched is None or sched[0] != e or self.iterations >= sched[3]
+
     def _check_now(self, every: float) -> int:
         """Whether this step checks collisions: 0 if not, else the steps until the next check
         (how far ahead the points are predicted). A whole `every` checks at the iterations it

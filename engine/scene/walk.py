@@ -2,7 +2,8 @@
 BodyTrack and let the cloth follow.
 
 Per body frame (1/fps s): the solver takes whole steps of at most the eq. 4 bound; before each
-step the collider is put at the step's end time (maps of the nearest frame, surface moved along
+step that checks collisions (ClothSolver.checks_next; the steps between do not ask the collider)
+the collider is put at the step's end time (maps of the nearest frame, surface moved along
 its velocity, root offset interpolated: engine.collide.moving). The collision response is
 relative to the body's velocity (seed 000 eq. 15), the reaction force (eq. 16) holds cloth
 pressed on the body, and the strain limit is eq. 5's average by default; the directional vector
@@ -294,7 +295,8 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
         for i in range(1, n_frames + 1):
             m0, c0, k0 = collider.stats["map_seconds"], solver.timing["cloth"], solver.timing["collision"]
             for s in range(sub):
-                collider.set_time((i - 1 + (s + 1) / sub) * frame_time)
+                if solver.checks_next():  # (the steps between checks do not ask the collider)
+                    collider.set_time((i - 1 + (s + 1) / sub) * frame_time)
                 solver.step(state, friction_scale=o.friction)
             t_maps += collider.stats["map_seconds"] - m0
             t_cloth += solver.timing["cloth"] - c0
