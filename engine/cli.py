@@ -289,7 +289,9 @@ def walk_cmd(
             typer.echo(str(p))
         r = w.report
         typer.echo(f"{report['cloth_vertices']} cloth vertices; dressed in {report['wall_seconds']['total']:.1f} s; "
-                   f"walked {r['frames']} frames at {r['fps']:g} fps in {r['wall_seconds']['walking']:.1f} s "
+                   + (f"collision maps of the ramp and a walk cycle rendered in {r['map_prerender_seconds']:.1f} s; "
+                      if r["map_prerender_seconds"] else "")
+                   + f"walked {r['frames']} frames at {r['fps']:g} fps in {r['wall_seconds']['walking']:.1f} s "
                    f"(realtime factor {r['realtime_factor']:.2f}; {r['ms_per_frame']['total']:.0f} ms/frame); "
                    f"penetration max {r['penetration_mm']['max']:.1f} mm p99 {r['penetration_mm']['p99']:.1f} mm; "
                    f"strain max {100 * r['strain_max']:.1f} %")

@@ -32,12 +32,13 @@ VM_MODES = {"zero": VM_ZERO, "average": VM_AVERAGE, "directional": VM_DIRECTIONA
 
 
 @njit(fastmath=True, cache=True, inline="always")
-def _axial(dx, dy, dz, du, dw, dq, rest, k, c_damp):
+def _axial(dx, dy, dz, du, dw, dq, rest, k, c_damp, one, tiny):
     """A spring's force per unit of its vector (dx, dy, dz), the other end's relative velocity
     (du, dw, dq): stiffness times extension plus damping of the rate of stretch, over the length;
-    and the length."""
+    and the length. one, tiny: 1 and 1e-30 in the precision the pass computes in (a literal would
+    be a double, and turn single-precision arithmetic into double)."""
     l2 = dx * dx + dy * dy + dz * dz
-    inv = 1.0 / np.sqrt(l2 + 1e-30)
+    inv = one / np.sqrt(l2 + tiny)
     length = l2 * inv
     rate = (du * dx + dw * dy + dq * dz) * inv
     return (k * (length - rest) + c_damp * rate) * inv, length
@@ -82,7 +83,7 @@ def _single_spring(s, sp, xs, ys, zs, vx, vy, vz, rest, k, spring_c, fx, fy, fz)
 @serial_kernel(error_model="numpy")
 def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprops, gravity, damping,
                               contact, contact_n, mu, dt, f_out, work, geo, soa, tmp, lengths, listed, listed_words,
-                              geo_s, r_fast, n_fast, n_run_slow, slow_due, f_slow):
+                              geo_s, r_fast, n_fast, n_run_slow, slow_due, f_slow, one, tiny):
     """Springs (eq. 2) with damping along each spring, gravity, viscous damping, then the
     reaction force of seed 000 eq. 16 where the vertex touched the body in the previous step
     (cancel the force into the body, Coulomb friction on the tangential part), then the velocity
@@ -115,7 +116,11 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
     made in the model's order -- the order the velocity modification goes through them
     (measured: listed in the runs' order instead, the drapes changed enough for default:female's
     M dress at 3 cm to end 6.05 % stretched, reported tight, where it ended at 5.93 % before;
-    in model order 5.94 %, in as many iterations as before)."""
+    in model order 5.94 %, in as many iterations as before).
+
+    The springs are computed in the precision of soa (with tmp, lengths, f_slow and sprops
+    alike; one and tiny as 1 and 1e-30 of it): double for the drape, single for the walk
+    (ClothSolver.single_precision_forces). Velocities are integrated in double either way."""
     n = x.shape[0]
     xs, ys, zs = soa[0], soa[1], soa[2]
     vx, vy, vz = soa[3], soa[4], soa[5]
@@ -146,7 +151,7 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
                 dx = xb[t] - xa[t]
                 dy = yb[t] - ya[t]
                 dz = zb[t] - za[t]
-                c, _ = _axial(dx, dy, dz, ub[t] - ua[t], wb[t] - wa[t], qb[t] - qa[t], r_[t], k_[t], c_[t])
+                c, _ = _axial(dx, dy, dz, ub[t] - ua[t], wb[t] - wa[t], qb[t] - qa[t], r_[t], k_[t], c_[t], one, tiny)
                 tx[t] = c * dx
                 ty[t] = c * dy
                 tz[t] = c * dz
@@ -170,7 +175,7 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
             dx = xb[t] - xa[t]
             dy = yb[t] - ya[t]
             dz = zb[t] - za[t]
-            c, length = _axial(dx, dy, dz, ub[t] - ua[t], wb[t] - wa[t], qb[t] - qa[t], r_[t], k_[t], c_[t])
+            c, length = _axial(dx, dy, dz, ub[t] - ua[t], wb[t] - wa[t], qb[t] - qa[t], r_[t], k_[t], c_[t], one, tiny)
             tx[t] = c * dx
             ty[t] = c * dy
             tz[t] = c * dz

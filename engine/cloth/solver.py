@@ -93,11 +93,8 @@ class ClothSolver:
         self.f = np.zeros((n, 3))
         # the force pass's spring order and buffers (engine.cloth.model.SpringRuns)
         r = model.runs
-        self._sprops = self._spring_props(model)
-        self._soa = np.zeros((9, n))
-        self._f_slow = np.zeros((3, n))  # the flexion springs' forces, as last evaluated (flexion_every)
-        self._run_tmp = np.zeros((3, r.longest))
-        self._lengths = np.zeros(len(model.springs))
+        self._soa = np.zeros((9, n))  # (also the strain guard's work buffer)
+        self._use_precision(np.float64)
         self._listed = np.zeros(-(-len(model.springs) // 8) * 8, dtype=np.uint8)
         self._listed_words = self._listed.view(np.uint64)
         self._geo_s = np.zeros((len(model.springs), 4))
@@ -128,10 +125,33 @@ class ClothSolver:
         self._q, self._q_age, self._q_version = None, 0, None  # the last map answer (see _contacts)
         self._schedule = None  # a fractional collide_every's check schedule (_check_now)
 
+    def _use_precision(self, dtype) -> None:
+        """The force pass's buffers and spring properties in `dtype` (K.eval_forces_and_integrate)."""
+        m, r, n = self.model, self.model.runs, self.model.n
+        self._fdtype = dtype
+        self._one, self._tiny = dtype(1.0), dtype(1e-30)
+        self._sprops = self._spring_props(m)
+        self._fsoa = self._soa if dtype == np.float64 else np.zeros((9, n), dtype)
+        self._f_slow = np.zeros((3, n), dtype)  # the flexion springs' forces, as last evaluated (flexion_every)
+        self._run_tmp = np.zeros((3, r.longest), dtype)
+        self._lengths = np.zeros(len(m.springs), dtype)
+        self._slow_held = False  # f_slow holds nothing yet: the next pass evaluates the slow group
+
+    def single_precision_forces(self) -> None:
+        """Compute the spring forces in single precision from now on (velocities and positions
+        stay double): the force pass's vector loops take twice the springs an instruction
+        (measured on the walking dress's runs: 2.8 instead of 4.5 ns a spring). A spring of
+        1.6 cm is then measured to ~1e-7 m (1.7 m from the origin), its force to ~1e-5 N -- a
+        few thousandths of a vertex's weight. The walk uses it (engine.scene.walk); the drape
+        stays double (it turns on the last bits of the forces: engine.cloth's history). Starts
+        the slow group's held forces afresh (they are evaluated at the next due step)."""
+        self._use_precision(np.float32)
+
     def _spring_props(self, model: ClothModel) -> np.ndarray:
         """(4, S) rest, stiffness, damping, strain limit (inf: not limited) in the force pass's order."""
         limit = np.where(self.active, (1.0 + model.fabric.strain_threshold) * model.rest, np.inf)
-        return np.ascontiguousarray(np.stack([model.rest, model.stiffness, model.spring_c, limit])[:, model.runs.perm])
+        return np.ascontiguousarray(np.stack([model.rest, model.stiffness, model.spring_c, limit])[:, model.runs.perm],
+                                    dtype=self._fdtype)
 
     def _guard_limits(self, threshold: float) -> np.ndarray:
         """The squared lengths past which K.guard_positions flags a spring (the force pass's
@@ -175,9 +195,12 @@ class ClothSolver:
                                              self._sprops, g, p.damping * damping_scale,
                                              self.contact, self.contact_n, m.fabric.friction * friction_scale, dt,
                                              self.f, self.vm_work, self.vm_geo,
-                                             self._soa, self._run_tmp, self._lengths, self._listed, self._listed_words,
-                                             self._geo_s, r.r_fast, r.n_fast, r.n_run_slow,
-                                             self.iterations % p.flexion_every == 0, self._f_slow)
+                                             self._fsoa, self._run_tmp, self._lengths, self._listed,
+                                             self._listed_words, self._geo_s, r.r_fast, r.n_fast, r.n_run_slow,
+                                             self.iterations % p.flexion_every == 0 or not self._slow_held,
+                                             self._f_slow,
+                                             self._one, self._tiny)
+        self._slow_held = True
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 §3)
         n_act = K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
                                     self.mode, g, dt, self.body_v, p.vm_passes,

@@ -121,6 +121,9 @@ class WalkOptions:
     # front against 1.54 s of the helper thread's time during the walk. False: render each
     # frame's maps when it comes up (ahead, as render_ahead says).
     prerender: bool = True
+    # Spring forces in single precision (ClothSolver.single_precision_forces; velocities and
+    # positions stay double). False: double, as the drape.
+    single_precision_forces: bool = True
     collision: str = "image"  # or "object": the BVH baseline (engine.collide.moving.TrackObjectCollider)
     friction: float = 1.0  # x the fabric's cloth-body friction (engine.scene.arms lowers arms without it)
 
@@ -283,6 +286,8 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
     stiffened = []
     stiffen_strain = model.fabric.strain_threshold + o.stiffen_at if o.stiffen_at is not None else np.inf
     solver = ClothSolver(model, collider, dt=dt)
+    if o.single_precision_forces:
+        solver.single_precision_forces()
     state = ClothState(drape.state.x.copy(), drape.state.v.copy())
     frames = np.empty((n_frames + 1, model.n, 3), np.float32)
     frames[0] = state.x
