@@ -659,7 +659,7 @@ def test_a_dead_query_server_is_an_error_not_a_hang(monkeypatch):
         for g, w in zip([a.copy() for a in col.query(p)], ref.query(p)):
             assert np.array_equal(g, w)
         # a request with its only chunk claimed (by a thread that then died) and not finished
-        col._post(1, col._t, col._shift_t)
+        col._post(1, col._t, col._shift_t, col._offset)
         ctl = col.server.ctl
         ctl[NEXT] = (int(ctl[REQ]) << 32) | 1
         col.help_wait = 3 * 10 ** 8  # ~0.1 s

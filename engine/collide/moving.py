@@ -99,12 +99,13 @@ MIN_NZ = 0.2  # a carried penetration changes at most 1 / MIN_NZ x the normal mo
 
 
 @serial_kernel
-def _query_cached(local, lo, hi, t, frame, tol, widened, shift_t, root_v, vmax, reach, max_age, slack, near,
+def _query_cached(pts, off, lo, hi, t, frame, tol, widened, shift_t, root_v, vmax, reach, max_age, slack, near,
                   surf, vel, has_vel, kind, side_src, geom, layout, zz,
                   c_local, c_time, c_frame, c_pen, c_un, c_surf,
                   status, surface, penetration, normal, velocity, map_index):
-    """Answer the points lo .. hi - 1 (each on its own: a point's answer and carried answer are
-    its rows alone), asking the maps only where the last answer may be stale: the maps
+    """Answer the points lo .. hi - 1 of pts (world; minus off: the root's frame) (each on its
+    own: a point's answer and carried answer are its rows alone), asking the maps only where the
+    last answer may be stale: the maps
     changed, the point moved `reach` (root frame), the answer is `max_age` old, or -- for a point
     the maps found no surface near (further than `near` outside the widened band) -- the point
     and the surface (at most vmax relative to the root) may together have closed its distance to
@@ -116,7 +117,7 @@ def _query_cached(local, lo, hi, t, frame, tol, widened, shift_t, root_v, vmax, 
     Returns how many points were asked."""
     asked = 0
     for p in range(lo, hi):
-        x, y, z = local[p, 0], local[p, 1], local[p, 2]
+        x, y, z = pts[p, 0] - off[0], pts[p, 1] - off[1], pts[p, 2] - off[2]
         dx, dy, dz = x - c_local[p, 0], y - c_local[p, 1], z - c_local[p, 2]
         moved = np.sqrt(dx * dx + dy * dy + dz * dz)
         age = t - c_time[p]
@@ -150,40 +151,33 @@ def _query_cached(local, lo, hi, t, frame, tol, widened, shift_t, root_v, vmax, 
     return asked
 
 
-@serial_kernel
-def _to_local(points, offset, out):
-    """out = points - offset (the root's frame), (M, 3) - (3,): numpy's broadcast runs its inner
-    loop over the 3 columns, one call per row (measured: 47-78 us for the dress's 8,085 points,
-    this loop ~9)."""
-    ox, oy, oz = offset[0], offset[1], offset[2]
-    for p in range(points.shape[0]):
-        out[p, 0] = points[p, 0] - ox
-        out[p, 1] = points[p, 1] - oy
-        out[p, 2] = points[p, 2] - oz
-
-
 SERIAL, WHICH = 4, 9  # the walking query server's own words: the maps' serial, which points (0: predicted, 1: this step's)
 CHUNK = 512  # points a claim takes
 
 
 @serial_kernel
-def _work(ctl, r, tally, par, pre_local, local, surf, vel, has_vel, kind, side_src, geom, layout, zz,
+def _work(ctl, r, tally, par, pre_pts, pts, surf, vel, has_vel, kind, side_src, geom, layout, zz,
           c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index):
     """Answer chunks of request r (_query_cached with the parameters in par: t, tol, widened,
-    shift_t, vmax, root_v; ctl[SERIAL]; the points pre_local or local, ctl[WHICH]) until none is
-    left to claim (engine.collide.server.claim: each chunk by one thread, whichever); returns
-    the points this thread asked."""
+    shift_t, vmax, root_v, the root's offset; ctl[SERIAL]; the world points pre_pts or pts,
+    ctl[WHICH]) until none is left to claim (engine.collide.server.claim: each chunk by one
+    thread, whichever); returns the points this thread asked. (Each chunk takes its points into
+    the root's frame itself: written into a buffer of their own by the solver's thread, those
+    rows went over to the server's core and back at every request -- measured, 41 us a request
+    of the dress's 7,426 points, for a subtraction.)"""
     asked = 0
     root_v = np.empty(3)
-    n = local.shape[0]
+    off = np.empty(3)
+    n = c_time.shape[0]
     while True:
         c = claim(ctl, r)
         if c < 0:
             return asked
         for k in range(3):
             root_v[k] = par[5 + k]
-        pts = local if ctl[WHICH] != 0 else pre_local
-        k = _query_cached(pts, c * CHUNK, min(n, (c + 1) * CHUNK), par[0], ctl[SERIAL], par[1], par[2], par[3],
+            off[k] = par[8 + k]
+        points = pts if ctl[WHICH] != 0 else pre_pts
+        k = _query_cached(points, off, c * CHUNK, min(n, (c + 1) * CHUNK), par[0], ctl[SERIAL], par[1], par[2], par[3],
                           root_v, par[4], REACH, MAX_AGE, SLACK, NEAR, surf, vel, has_vel, kind, side_src, geom,
                           layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
                           status, surface, penetration, normal, velocity, map_index)
@@ -192,19 +186,19 @@ def _work(ctl, r, tally, par, pre_local, local, surf, vel, has_vel, kind, side_s
 
 
 @serial_kernel
-def _help(ctl, wait, par, pre_local, local, surf, vel, has_vel, kind, side_src, geom, layout, zz,
+def _help(ctl, wait, par, pre_pts, pts, surf, vel, has_vel, kind, side_src, geom, layout, zz,
           c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index):
     """The solver's thread: answer what is left of the last request (_work), then wait for the
     chunks the server holds. Returns the ticks it waited, or -1 when a chunk was not finished
     within `wait` time-stamp counter ticks (the server's thread died holding it)."""
-    _work(ctl, atomic_load(ctl, REQ), SOLVER_CHUNKS, par, pre_local, local, surf, vel, has_vel, kind,
+    _work(ctl, atomic_load(ctl, REQ), SOLVER_CHUNKS, par, pre_pts, pts, surf, vel, has_vel, kind,
           side_src, geom, layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
           status, surface, penetration, normal, velocity, map_index)
     return wait_chunks(ctl, wait)
 
 
 @serial_kernel
-def _serve(ctl, par, pre_local, local, surf, vel, has_vel, kind, side_src, geom, layout, zz,
+def _serve(ctl, par, pre_pts, pts, surf, vel, has_vel, kind, side_src, geom, layout, zz,
            c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index):
     """The query server's kernel (engine.collide.server; TrackCollider._post) for one frame's
     maps: takes chunks of each request (_work) beside the solver's thread; returns on
@@ -216,7 +210,7 @@ def _serve(ctl, par, pre_local, local, surf, vel, has_vel, kind, side_src, geom,
         if r < 0:
             return
         last = r
-        _work(ctl, r, SERVER_CHUNKS, par, pre_local, local, surf, vel, has_vel, kind, side_src, geom, layout, zz,
+        _work(ctl, r, SERVER_CHUNKS, par, pre_pts, pts, surf, vel, has_vel, kind, side_src, geom, layout, zz,
               c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index)
         atomic_store(ctl, DONE, r)
 
@@ -336,6 +330,7 @@ class TrackCollider:
         self.stalls = StallWatch()
         self.last_asked = 0
         self._served = None
+        self._pts = self._pre_pts = np.zeros((0, 3))  # the points asked for (the caller's arrays)
         self._posted = False  # a query request posted and not yet known to be answered (_finish)
 
     def _frame_maps(self, k: int) -> CollisionMaps:
@@ -481,8 +476,7 @@ class TrackCollider:
             self._vmax = float(np.sqrt(np.einsum("ij,ij->i", rel, rel).max()))
             self._k_serial += 1  # answers from other maps are not carried over
             if self.helper and self._n > 0:  # the server starts on these maps now, not at the first query
-                self._served = (self.server.par, self._pre_local, self.local, *self.maps.kernel_args(),
-                                *self._carried())
+                self._served = self._server_args()
                 self.server.start(_serve, self._served)
         self._shift_t = t - i / tr.fps
         self._t = t
@@ -492,8 +486,6 @@ class TrackCollider:
     def _alloc(self, n: int) -> None:
         self._stop_server()
         alloc_answers(self, n)
-        self.local = np.zeros((n, 3))
-        self._pre_local = np.zeros((n, 3))  # the points prefetch asks for
         # each point's last map answer: where (root frame), when, from which maps, penetration
         # then and the surface's normal speed relative to the root
         self.c_local = np.zeros((n, 3))
@@ -510,7 +502,8 @@ class TrackCollider:
         query at that check asks the maps itself only for the points that ended up elsewhere.
         The server serves one frame's maps and is stopped when the frame changes (set_time).
         Skipped (False) when that time falls in another frame or the points are not the
-        queried ones."""
+        queried ones. `points` is read while the caller steps on: it must stay unchanged until
+        the next query or prefetch (the solver writes its predicted points only then)."""
         if self.maps is None or points.shape[0] != self._n:
             return False
         tr = self.track
@@ -518,18 +511,21 @@ class TrackCollider:
         i = int(round(max(t, 0.0) * tr.fps))
         if tr.index(i)[0] != self._k:
             return False
-        self._finish()  # (the last request's answers, before its points are written again)
-        _to_local(points, tr.offset_at(t), self._pre_local)
-        self._post(0, t, t - i / tr.fps)
+        self._finish()  # (the last request's answers)
+        if points is not self._pre_pts or not (points.flags.c_contiguous and points.dtype == np.float64):
+            self._stop_server()  # (the server reads the caller's array: a new one restarts it)
+            self._pre_pts = np.ascontiguousarray(points, dtype=np.float64)
+        self._post(0, t, t - i / tr.fps, tr.offset_at(t))
         return True
 
-    def _post(self, which: int, t: float, shift_t: float) -> None:
-        """Post a query of the points (which 0: _pre_local, 1: local) at time t, shift_t from
-        this frame's maps, in chunks that the query server's thread and this one claim
-        (_work): the server starts on it at once; _finish answers the rest and waits."""
+    def _post(self, which: int, t: float, shift_t: float, offset: np.ndarray) -> None:
+        """Post a query of the points (which 0: the prefetched ones, 1: the queried ones; world,
+        `offset` the root's) at time t, shift_t from this frame's maps, in chunks that the query
+        server's thread and this one claim (_work): the server starts on it at once; _finish
+        answers the rest and waits."""
         sv = self.server
         if self._served is None:  # (None at every change of maps, set_time, and of arrays, _alloc)
-            self._served = (sv.par, self._pre_local, self.local, *self.maps.kernel_args(), *self._carried())
+            self._served = self._server_args()
         if self.helper and not sv.running_on(self._served):
             sv.start(_serve, self._served)
         ctl, par = sv.ctl, sv.par
@@ -537,6 +533,7 @@ class TrackCollider:
         ctl[SERIAL] = self._k_serial
         par[0], par[1], par[2], par[3], par[4] = t, self.tol, self._vmax * abs(shift_t), shift_t, self._vmax
         par[5:8] = self._root_v
+        par[8:11] = offset
         sv.post_chunks(-(-self._n // CHUNK), launch=self.helper)
         self._posted = True
 
@@ -555,6 +552,11 @@ class TrackCollider:
         self.last_asked = int(self.server.ctl[ASKED])  # (points the request asked the maps for)
         self.stats["asked"] += self.last_asked
 
+    def _server_args(self) -> tuple:
+        """_serve's arguments after ctl: par, the prefetched and the queried points, the maps',
+        the carried answers and the answers."""
+        return (self.server.par, self._pre_pts, self._pts, *self.maps.kernel_args(), *self._carried())
+
     def _carried(self) -> tuple:
         """_query_cached's arrays after the maps': the carried answers, then the answers."""
         return (self.c_local, self.c_time, self.c_frame, self.c_pen, self.c_un, self.c_surf,
@@ -570,8 +572,10 @@ class TrackCollider:
         self._finish()
         if points.shape[0] != self._n:
             self._alloc(points.shape[0])
-        _to_local(points, self._offset, self.local)
-        self._post(1, self._t, self._shift_t)
+        if points is not self._pts or not (points.flags.c_contiguous and points.dtype == np.float64):
+            self._stop_server()  # (the server reads the caller's array: a new one restarts it)
+            self._pts = np.ascontiguousarray(points, dtype=np.float64)
+        self._post(1, self._t, self._shift_t, self._offset)
         self._finish()
         self.stats["points"] += points.shape[0]
         return self.status, self.normal, self.velocity, self.depth
