@@ -633,12 +633,40 @@ def test_an_idle_query_server_returns_and_starts_again():
 
 
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
+def test_chunks_are_claimed_once_from_either_end():
+    """A request's chunks claimed from the start (the server) and from the end (the walk's
+    solver thread) meet in the middle, each chunk once; a thread holding another request's
+    number claims nothing."""
+    from numba import njit
+
+    from engine.collide.server import REQ, SpinServer, claim
+
+    @njit
+    def claims(ctl, r, ends):
+        out = np.empty(ends.shape[0], np.int64)
+        for i in range(ends.shape[0]):
+            out[i] = claim(ctl, r, ends[i])
+        return out
+
+    def take(ctl, r, ends):
+        return claims(ctl, r, np.array(ends)).tolist()
+
+    sv = SpinServer("test")
+    sv.post_chunks(5, launch=False)
+    r = int(sv.ctl[REQ])
+    assert take(sv.ctl, r - 1, [False, True]) == [-1, -1]
+    assert take(sv.ctl, r, [False, True, False, True, False, True, False]) == [0, 4, 1, 3, 2, -1, -1]
+    sv.post_chunks(3, launch=False)
+    assert take(sv.ctl, r, [False]) == [-1]  # (the old request)
+    assert take(sv.ctl, r + 1, [True, True, True, True]) == [2, 1, 0, -1]
+
+
 def test_a_dead_query_server_is_an_error_not_a_hang(monkeypatch):
     """A query server whose thread died before taking part answers nothing: the solver's thread
     answers every chunk itself, the same answers. One that died holding a chunk of a query is
     an error once the wait for it ends -- not a hang, not a half answer."""
     import engine.collide.moving as mv
-    from engine.collide.server import NEXT, REQ
+    from engine.collide.server import NEXT, REQ, claim_word
     from engine.errors import SimulationError
 
     def broken(*args):
@@ -661,7 +689,7 @@ def test_a_dead_query_server_is_an_error_not_a_hang(monkeypatch):
         # a request with its only chunk claimed (by a thread that then died) and not finished
         col._post(1, col._t, col._shift_t, col._offset)
         ctl = col.server.ctl
-        ctl[NEXT] = (int(ctl[REQ]) << 32) | 1
+        ctl[NEXT] = claim_word(int(ctl[REQ]), 1, 1)
         col.help_wait = 3 * 10 ** 8  # ~0.1 s
         with pytest.raises(SimulationError, match="query server stopped answering"):
             col._finish()

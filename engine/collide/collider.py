@@ -11,6 +11,10 @@ from engine.collide.server import DONE, HELP_WAIT, REQ, RUNNING, SERVER_CHUNKS, 
     after_help, chunk_done, claim, helper_default, serve_wait, wait_chunks
 from engine.jit import atomic_load, atomic_store, serial_kernel
 
+# (The kernels below inline engine.collide.server's claim and friends: numba's on-disk cache of a
+# kernel is checked against this file only, so a change there must come with a change here --
+# 2026-12-04: the claim word's layout changed.)
+
 N_ROWS = 4  # the row query server's own word: rows in the request
 ROW_CHUNK = 128  # rows a claim takes
 SHARE_ROWS = 256  # a query of fewer rows is answered by the solver's thread alone (MapCollider.query_rows)

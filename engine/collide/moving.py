@@ -170,7 +170,7 @@ def _work(ctl, r, tally, par, pre_pts, pts, surf, vel, has_vel, kind, side_src, 
     off = np.empty(3)
     n = c_time.shape[0]
     while True:
-        c = claim(ctl, r)
+        c = claim(ctl, r, tally == SOLVER_CHUNKS)  # (the solver's thread from the end: engine.collide.server.claim)
         if c < 0:
             return asked
         for k in range(3):

@@ -41,9 +41,9 @@ from engine.jit import atomic_add, atomic_cas, atomic_load, atomic_store, cycle_
 
 REQ, DONE, STOP, RUNNING = range(4)  # control words; the kernels may use ctl[4:] for their own
 # ... and a request answered in chunks (post_chunks; claim, chunk_done, wait_chunks): points the
-# request asked the maps for, the next chunk to claim (the request's number << 32 | chunk),
-# chunks finished, chunks in the request; chunks the server's thread answered, and the
-# poster's (running counts)
+# request asked the maps for, the chunks left to claim (claim_word: the request's number, the
+# first and the end of the range not yet claimed), chunks finished, chunks in the request;
+# chunks the server's thread answered, and the poster's (running counts)
 ASKED, NEXT, FINISHED, N_CHUNKS, SERVER_CHUNKS, SOLVER_CHUNKS = 5, 6, 7, 8, 10, 11
 WAIT = 30.0  # s: the longest wait for an answer before the server is taken as dead
 IDLE = 3 * 10 ** 8  # time-stamp counter ticks (~0.1 s) without a request after which a kernel returns
@@ -64,18 +64,39 @@ def serve_wait(ctl, last):
         spin_pause()
 
 
+REQ_BITS = 15  # the request number's low bits in the claim word (a request is claimed only
+# while it is the last one posted; the poster waits for each before posting another)
+_CHUNK_MASK = (1 << 24) - 1
+
+
 @njit(cache=True, inline="always")
-def claim(ctl, r):
-    """The next chunk of request r, claimed for this thread (either thread may call it at any
-    time: ctl[NEXT] is swapped from (r, c) to (r, c + 1), so each chunk goes to one thread, and
-    a thread holding an older request's number claims nothing), or -1 when none is left."""
+def claim_word(r, first, end):
+    """ctl[NEXT] for request r with chunks first .. end - 1 left to claim."""
+    return ((r & ((1 << REQ_BITS) - 1)) << 48) | (first << 24) | end
+
+
+@njit(cache=True, inline="always")
+def claim(ctl, r, from_end=False):
+    """A chunk of request r, claimed for this thread (either thread may call it at any time:
+    ctl[NEXT] holds the range of chunks not yet claimed and is swapped for the range less this
+    one, so each chunk goes to one thread, and a thread holding an older request's number
+    claims nothing), or -1 when none is left. The first of the range, or with from_end the last:
+    the walk's solver thread claims from the end and its query server from the start, so each
+    keeps answering about the same points -- their rows stay in its core's cache instead of
+    crossing to the other core at every request.
+    Inlined into the servers' kernels (engine.collide.moving, engine.collide.collider): numba's
+    on-disk cache checks a kernel against its own file only -- change those files with this."""
     while True:
         w = atomic_load(ctl, NEXT)
-        c = w & 0xFFFFFFFF
-        if (w >> 32) != r or c >= ctl[N_CHUNKS]:
+        first = (w >> 24) & _CHUNK_MASK
+        end = w & _CHUNK_MASK
+        if (w >> 48) != (r & ((1 << REQ_BITS) - 1)) or first >= end:
             return -1
-        if atomic_cas(ctl, NEXT, w, w + 1):
-            return c
+        if from_end:
+            if atomic_cas(ctl, NEXT, w, w - 1):
+                return end - 1
+        elif atomic_cas(ctl, NEXT, w, w + (1 << 24)):
+            return first
 
 
 @njit(cache=True, inline="always")
@@ -238,7 +259,7 @@ class SpinServer:
         """Post a request answered in n_chunks chunks (claim): the kernel's own words and par
         first, then this (the chunk count after the claim word: see claim)."""
         ctl = self.ctl
-        ctl[NEXT] = self.next_request << 32
+        ctl[NEXT] = claim_word(self.next_request, 0, n_chunks)
         ctl[FINISHED] = ctl[ASKED] = 0
         ctl[N_CHUNKS] = n_chunks
         self.request(launch)
