@@ -661,6 +661,7 @@ def test_chunks_are_claimed_once_from_either_end():
     assert take(sv.ctl, r + 1, [True, True, True, True]) == [2, 1, 0, -1]
 
 
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")  # (its server dies on purpose)
 def test_a_dead_query_server_is_an_error_not_a_hang(monkeypatch):
     """A query server whose thread died before taking part answers nothing: the solver's thread
     answers every chunk itself, the same answers. One that died holding a chunk of a query is
