@@ -396,9 +396,7 @@ class TrackCollider:
                 self._let_go(maps)
             if progress is not None:
                 progress(n + 1, len(todo))
-        took = time.perf_counter() - t0
-        self.stats["prerender_seconds"] = self.stats.get("prerender_seconds", 0.0) + took
-        return took
+        return time.perf_counter() - t0
 
     def _render(self, k: int):
         """Frame k's maps (and their kept copy): (maps, kept or None, seconds it took)."""
@@ -512,9 +510,7 @@ class TrackCollider:
         if tr.index(i)[0] != self._k:
             return False
         self._finish()  # (the last request's answers)
-        if points is not self._pre_pts or not (points.flags.c_contiguous and points.dtype == np.float64):
-            self._stop_server()  # (the server reads the caller's array: a new one restarts it)
-            self._pre_pts = np.ascontiguousarray(points, dtype=np.float64)
+        self._pre_pts = self._served_points(points, self._pre_pts)
         self._post(0, t, t - i / tr.fps, tr.offset_at(t))
         return True
 
@@ -552,6 +548,15 @@ class TrackCollider:
         self.last_asked = int(self.server.ctl[ASKED])  # (points the request asked the maps for)
         self.stats["asked"] += self.last_asked
 
+    def _served_points(self, points: np.ndarray, current: np.ndarray) -> np.ndarray:
+        """The array the server is to read the caller's points from: the caller's own (float64,
+        C order; else a copy), and when it is not the one the server reads, the server stops (it
+        starts again on the new one)."""
+        if points is not current or not (points.flags.c_contiguous and points.dtype == np.float64):
+            self._stop_server()
+            return np.ascontiguousarray(points, dtype=np.float64)
+        return current
+
     def _server_args(self) -> tuple:
         """_serve's arguments after ctl: par, the prefetched and the queried points, the maps',
         the carried answers and the answers."""
@@ -572,9 +577,7 @@ class TrackCollider:
         self._finish()
         if points.shape[0] != self._n:
             self._alloc(points.shape[0])
-        if points is not self._pts or not (points.flags.c_contiguous and points.dtype == np.float64):
-            self._stop_server()  # (the server reads the caller's array: a new one restarts it)
-            self._pts = np.ascontiguousarray(points, dtype=np.float64)
+        self._pts = self._served_points(points, self._pts)
         self._post(1, self._t, self._shift_t, self._offset)
         self._finish()
         self.stats["points"] += points.shape[0]
