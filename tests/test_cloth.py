@@ -867,31 +867,45 @@ def test_spring_runs_hold_every_spring_once():
             covered += length
         assert covered - start == n_in
     assert r.n_run + r.n_run_slow >= 0.85 * len(m.springs), (r.n_run + r.n_run_slow) / len(m.springs)
-    assert r.fast.n_run == r.n_run and len(r.fast.perm) == r.n_fast
+    assert r.fast.n_run == r.n_run and len(r.fast.perm) == r.n_fast and r.r_held == r.r_fast
+    # the walk's layout: the shear springs' runs after the stretch springs' in the fast group
+    h = spring_runs(m.springs, slow=m.kind == FLEXION, held=m.kind == SHEAR)
+    assert np.array_equal(np.sort(h.perm), np.arange(len(m.springs)))
+    assert np.array_equal(h.springs, m.springs[h.perm]) and h.n_fast == r.n_fast and 0 < h.r_held < h.r_fast
+    in_runs = [np.arange(f, f + ln) for f, _, _, ln in h.runs[:h.r_fast]]
+    own, held = np.concatenate(in_runs[:h.r_held]), np.concatenate(in_runs[h.r_held:])
+    assert np.all(m.kind[h.perm[own]] == STRUCTURAL) and np.all(m.kind[h.perm[held]] == SHEAR)
+    assert np.array_equal(np.concatenate([own, held]), np.arange(h.n_run))
+    for first, a0, b0, length in h.runs:
+        t = np.arange(length)
+        assert np.array_equal(h.springs[first:first + length], np.stack([a0 + t, b0 + t], axis=1))
+    assert np.array_equal(h.runs[h.r_fast:, 1:], r.runs[r.r_fast:, 1:]) and h.n_run_slow == r.n_run_slow
     # a scattered spring list has no runs and is all done one by one
     one = spring_runs(np.array([[0, 5], [3, 1], [7, 2]], np.int32))
     assert one.n_run == 0 and one.runs.shape == (0, 4) and sorted(one.perm) == [0, 1, 2]
 
 
 def _force_pass(solver, x, v, damping, mu, dt, slow_due):
-    m, r = solver.model, solver.model.runs
+    m, r = solver.model, solver.runs
     return K.eval_forces_and_integrate(x, v, m.inv_mass, m.mass, r.springs, r.perm, r.runs, r.n_run,
                                        solver._sprops, GRAVITY, damping, solver.contact, solver.contact_n, mu,
                                        dt, solver.f, solver.vm_work, solver.vm_geo, solver._fsoa, solver._run_tmp,
                                        solver._lengths, solver._listed, solver._listed_words,
                                        solver._geo_s, r.r_fast, r.n_fast, r.n_run_slow, slow_due, solver._f_slow,
-                                       solver._one, solver._tiny)
+                                       solver._one, solver._tiny, r.r_held)
 
 
 # (relative error of the forces: double; single precision, ClothSolver.single_precision_forces --
 # measured 2026-12-04 on this test's dress: 1.0e-5 of the largest force)
-@pytest.mark.parametrize("single, tol", [(False, 1e-9), (True, 3e-5)])
-def test_force_pass_matches_a_direct_sum(single, tol):
+@pytest.mark.parametrize("single, held, tol", [(False, False, 1e-9), (True, False, 3e-5), (False, True, 1e-9),
+                                               (True, True, 3e-5)])
+def test_force_pass_matches_a_direct_sum(single, held, tol):
     """eval_forces_and_integrate on the catalogue dress, jiggled: forces (springs with damping
     along them, gravity, viscous damping, the reaction force on contacts with Coulomb friction),
     velocities after the step, and the listed over-long springs (in the model's order) against
     the same sums written with numpy one spring at a time -- in double precision, and in single
-    (the walk's) to what single precision allows."""
+    (the walk's) to what single precision allows; with the shear springs held as the flexion
+    springs are (ClothSolver.hold_shear, the walk's) and without."""
     g, m = _catalogue_dress_model()
     rng = np.random.default_rng(3)
     x = g.positions + rng.normal(0, 0.002, g.positions.shape)
@@ -900,6 +914,9 @@ def test_force_pass_matches_a_direct_sum(single, tol):
     if single:
         solver.single_precision_forces()
         assert solver._fsoa.dtype == solver._sprops.dtype == np.float32 and solver._soa.dtype == np.float64
+    if held:
+        solver.hold_shear()
+        assert solver.runs.r_held < solver.runs.r_fast
     solver.contact[:] = rng.random(m.n) < 0.3
     n = rng.normal(size=(m.n, 3))
     solver.contact_n[:] = n / np.linalg.norm(n, axis=1, keepdims=True)
@@ -942,8 +959,13 @@ def test_force_pass_matches_a_direct_sum(single, tol):
     x2 = x + rng.normal(0, 0.002, x.shape)
     solver.contact[:] = False
     v2 = v.copy()
-    _force_pass(solver, x2, v2, damping, mu, dt, False)
+    n_over2 = _force_pass(solver, x2, v2, damping, mu, dt, False)
     flex = m.kind == FLEXION
+    r = solver.runs
+    for first, _, _, length in r.runs[r.r_held:r.r_fast]:  # the held runs' springs (those outside runs are not held)
+        flex[r.perm[first:first + length]] = True
+    shear_held = np.count_nonzero(flex & (m.kind == SHEAR))
+    assert shear_held > 0.8 * np.count_nonzero(m.kind == SHEAR) if held else shear_held == 0
     xs = np.where(flex[:, None], x[b] - x[a], x2[b] - x2[a])  # each spring's vector where it was evaluated
     ls = np.linalg.norm(xs, axis=1)
     cs = (m.stiffness * (ls - m.rest) + m.spring_c * np.einsum("ij,ij->i", v[b] - v[a], xs) / ls) / ls
@@ -960,6 +982,16 @@ def test_force_pass_matches_a_direct_sum(single, tol):
     np.add.at(fresh, a, change)
     np.add.at(fresh, b, -change)
     assert np.abs(solver.f - fresh).max() > 5 * np.abs(solver.f - f2).max()
+    # every limited spring is listed where it is now, held or not (the held ones by their lengths alone)
+    over2 = np.flatnonzero((m.kind != FLEXION) & (l2 > limit))
+    assert (m.kind[over2] == SHEAR).sum() > 10
+    listed2 = solver.vm_work[:n_over2]
+    odd = np.setxor1d(listed2, over2)
+    assert np.all(np.abs(l2[odd] - limit[odd]) <= (1e-6 if single else 1e-12) * limit[odd])
+    assert np.all(np.diff(listed2) > 0)
+    geo2 = solver.vm_geo[:n_over2]
+    assert np.allclose(geo2[:, :3], d2[listed2] / l2[listed2, None], atol=10 * tol)
+    assert np.allclose(geo2[:, 3], l2[listed2] - limit[listed2], atol=tol * m.rest.max())
 
 
 def test_strain_guard_never_pulls_a_contact_into_the_body():

@@ -83,7 +83,7 @@ def _single_spring(s, sp, xs, ys, zs, vx, vy, vz, rest, k, spring_c, fx, fy, fz)
 @serial_kernel(error_model="numpy")
 def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprops, gravity, damping,
                               contact, contact_n, mu, dt, f_out, work, geo, soa, tmp, lengths, listed, listed_words,
-                              geo_s, r_fast, n_fast, n_run_slow, slow_due, f_slow, one, tiny):
+                              geo_s, r_fast, n_fast, n_run_slow, slow_due, f_slow, one, tiny, r_held):
     """Springs (eq. 2) with damping along each spring, gravity, viscous damping, then the
     reaction force of seed 000 eq. 16 where the vertex touched the body in the previous step
     (cancel the force into the body, Coulomb friction on the tangential part), then the velocity
@@ -104,7 +104,10 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
     The slow group (SpringRuns: runs[r_fast:], springs from n_fast on; the flexion springs,
     ClothParams.flexion_every) is evaluated only when slow_due: its forces go to f_slow (3, N),
     which every step adds in as it was last evaluated (multiple time stepping: the force of a
-    spring thousands of times softer than the stretch springs, held over a few steps).
+    spring thousands of times softer than the stretch springs, held over a few steps). So are the
+    forces of the fast group's held runs (runs[r_held:r_fast]; r_held = r_fast: none), which
+    are still listed every step: a vector pass over their squared lengths, without forces (the
+    walk's shear springs, ~200 x softer than the stretch springs: ClothSolver.hold_shear).
 
     The same pass lists the springs longer than their listing length in `work` (their
     model indices; directions and excesses in `geo`, see _store_geo) and returns their count:
@@ -140,7 +143,7 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
             sx[i] = 0.0
             sy[i] = 0.0
             sz[i] = 0.0
-        for r in range(r_fast, runs.shape[0]):
+        for r in range(r_held, runs.shape[0]):
             s0, a0, b0, m = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3]
             xa, ya, za = xs[a0:a0 + m], ys[a0:a0 + m], zs[a0:a0 + m]
             xb, yb, zb = xs[b0:b0 + m], ys[b0:b0 + m], zs[b0:b0 + m]
@@ -163,7 +166,28 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
         fy[i] = mass[i] * gravity[1] - damping * mass[i] * vy[i] + sy[i]
         fz[i] = mass[i] * gravity[2] - damping * mass[i] * vz[i] + sz[i]
     n_act = 0
-    for r in range(r_fast):
+    for r in range(r_held, r_fast):  # held runs: listed only
+        s0, a0, b0, m = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3]
+        xa, ya, za = xs[a0:a0 + m], ys[a0:a0 + m], zs[a0:a0 + m]
+        xb, yb, zb = xs[b0:b0 + m], ys[b0:b0 + m], zs[b0:b0 + m]
+        lim_ = limits[s0:s0 + m]
+        over = 0
+        for t in range(m):
+            dx = xb[t] - xa[t]
+            dy = yb[t] - ya[t]
+            dz = zb[t] - za[t]
+            over += dx * dx + dy * dy + dz * dz > lim_[t] * lim_[t]
+        if over:
+            for t in range(m):
+                dx = xb[t] - xa[t]
+                dy = yb[t] - ya[t]
+                dz = zb[t] - za[t]
+                length = np.sqrt(dx * dx + dy * dy + dz * dz)
+                if length > lim_[t]:
+                    listed[perm[s0 + t]] = 1
+                    _store_geo(geo_s, perm[s0 + t], dx, dy, dz, length, lim_[t])
+                    n_act += 1
+    for r in range(r_held):
         s0, a0, b0, m = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3]
         xa, ya, za = xs[a0:a0 + m], ys[a0:a0 + m], zs[a0:a0 + m]
         xb, yb, zb = xs[b0:b0 + m], ys[b0:b0 + m], zs[b0:b0 + m]

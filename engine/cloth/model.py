@@ -155,7 +155,11 @@ class SpringRuns:
     With a slow group (spring_runs' `slow`, the force pass evaluates it every few steps only):
     the fast springs come first, ordered as above (runs[:r_fast], n_run of them in runs, n_fast
     in all), then the slow ones, ordered the same way (runs[r_fast:], their n_run_slow springs in
-    runs from position n_fast on, then the rest)."""
+    runs from position n_fast on, then the rest).
+    With held springs (spring_runs' `held`: fast springs whose forces the force pass evaluates
+    with the slow group, while still listing them every step): the fast group's runs are its
+    other springs' runs (runs[:r_held]) and then the held ones' (runs[r_held:r_fast]), the
+    springs of both outside runs after them (the force pass evaluates those every step)."""
 
     perm: np.ndarray
     springs: np.ndarray
@@ -164,11 +168,14 @@ class SpringRuns:
     r_fast: int = -1
     n_fast: int = -1
     n_run_slow: int = 0
+    r_held: int = -1
 
     def __post_init__(self):
         if self.r_fast < 0:  # no slow group
             object.__setattr__(self, "r_fast", len(self.runs))
             object.__setattr__(self, "n_fast", len(self.perm))
+        if self.r_held < 0:  # no held springs
+            object.__setattr__(self, "r_held", self.r_fast)
 
     @property
     def longest(self) -> int:
@@ -183,10 +190,41 @@ class SpringRuns:
                           runs=self.runs[:self.r_fast], n_run=self.n_run)
 
 
-def spring_runs(springs: np.ndarray, min_run: int = MIN_RUN, slow: np.ndarray | None = None) -> SpringRuns:
+def _held_runs(springs: np.ndarray, held: np.ndarray, min_run: int) -> SpringRuns:
+    """The runs of the springs not held, then those of the held ones, then the springs of both
+    outside runs (SpringRuns' held layout)."""
+    own_i, held_i = np.flatnonzero(~held), np.flatnonzero(held)
+    o, h = spring_runs(springs[own_i], min_run), spring_runs(springs[held_i], min_run)
+    hr = h.runs.copy()
+    hr[:, 0] += o.n_run
+    perm = np.concatenate([own_i[o.perm[:o.n_run]], held_i[h.perm[:h.n_run]],
+                           own_i[o.perm[o.n_run:]], held_i[h.perm[h.n_run:]]]).astype(np.int64)
+    return SpringRuns(perm=perm, springs=springs[perm].astype(np.int32), runs=np.concatenate([o.runs, hr]),
+                      n_run=o.n_run + h.n_run, r_held=len(o.runs))
+
+
+def spring_runs(springs: np.ndarray, min_run: int = MIN_RUN, slow: np.ndarray | None = None,
+                held: np.ndarray | None = None) -> SpringRuns:
     """Find the runs: springs sorted by end-to-end offset b - a, then by a; a run is a stretch of
     that order where a goes up by one each spring. slow: (S,) bool, the springs of the slow group
-    (see SpringRuns), ordered the same way after the others."""
+    (see SpringRuns), ordered the same way after the others. held: (S,) bool, fast springs whose
+    forces go with the slow group's (SpringRuns; the walk's shear springs)."""
+    if held is not None and held.any():
+        if slow is not None and (slow & held).any():
+            raise ValueError("spring_runs: a held spring is a fast one; it cannot be slow too")
+        fast = ~slow if slow is not None else np.ones(len(held), np.bool_)
+        fast_i = np.flatnonzero(fast)
+        f = _held_runs(springs[fast_i], held[fast_i], min_run)
+        if slow is None or not slow.any():
+            return f
+        slow_i = np.flatnonzero(slow)
+        w = spring_runs(springs[slow_i], min_run)
+        wr = w.runs.copy()
+        wr[:, 0] += len(fast_i)
+        perm = np.concatenate([fast_i[f.perm], slow_i[w.perm]]).astype(np.int64)
+        return SpringRuns(perm=perm, springs=springs[perm].astype(np.int32), runs=np.concatenate([f.runs, wr]),
+                          n_run=f.n_run, r_fast=len(f.runs), n_fast=len(fast_i), n_run_slow=w.n_run,
+                          r_held=f.r_held)
     if slow is not None and slow.any():
         fast_i, slow_i = np.flatnonzero(~slow), np.flatnonzero(slow)
         f, w = spring_runs(springs[fast_i], min_run), spring_runs(springs[slow_i], min_run)

@@ -21,7 +21,7 @@ from typing import Protocol
 import numpy as np
 
 from engine.cloth import kernels as K
-from engine.cloth.model import FLEXION, ClothModel, ClothState
+from engine.cloth.model import FLEXION, SHEAR, ClothModel, ClothState, spring_runs
 from engine.cloth.welds import pull_seams
 from engine.errors import InputError
 
@@ -92,7 +92,7 @@ class ClothSolver:
         self.active = model.kind != FLEXION  # flexion springs may shorten/lengthen with folds
         self.f = np.zeros((n, 3))
         # the force pass's spring order and buffers (engine.cloth.model.SpringRuns)
-        r = model.runs
+        self.runs = model.runs
         self._soa = np.zeros((9, n))  # (also the strain guard's work buffer)
         self._use_precision(np.float64)
         self._listed = np.zeros(-(-len(model.springs) // 8) * 8, dtype=np.uint8)
@@ -127,7 +127,7 @@ class ClothSolver:
 
     def _use_precision(self, dtype) -> None:
         """The force pass's buffers and spring properties in `dtype` (K.eval_forces_and_integrate)."""
-        m, r, n = self.model, self.model.runs, self.model.n
+        m, r, n = self.model, self.runs, self.model.n
         self._fdtype = dtype
         self._one, self._tiny = dtype(1.0), dtype(1e-30)
         self._sprops = self._spring_props(m)
@@ -147,10 +147,24 @@ class ClothSolver:
         the slow group's held forces afresh (they are evaluated at the next due step)."""
         self._use_precision(np.float32)
 
+    def hold_shear(self) -> None:
+        """Evaluate the shear springs' forces with the slow group from now on (every
+        flexion_every steps, held in between), while still listing them for the strain limit
+        every step (engine.cloth.model.SpringRuns' held springs). A shear spring is ~200 x
+        softer than a stretch spring (engine.cloth.fabrics: cotton 0.38 against 82 N/m at the
+        walk's stiffness); the stretch springs set the eq. 4 step. The walk uses it; the drape
+        does not (it stays as it was, bit for bit)."""
+        m = self.model
+        if not (m.kind == SHEAR).any():
+            return
+        self.runs = spring_runs(m.springs, slow=m.kind == FLEXION, held=m.kind == SHEAR)
+        self._use_precision(self._fdtype)
+        self._guard_lim2 = (None, None)
+
     def _spring_props(self, model: ClothModel) -> np.ndarray:
         """(4, S) rest, stiffness, damping, strain limit (inf: not limited) in the force pass's order."""
         limit = np.where(self.active, (1.0 + model.fabric.strain_threshold) * model.rest, np.inf)
-        return np.ascontiguousarray(np.stack([model.rest, model.stiffness, model.spring_c, limit])[:, model.runs.perm],
+        return np.ascontiguousarray(np.stack([model.rest, model.stiffness, model.spring_c, limit])[:, self.runs.perm],
                                     dtype=self._fdtype)
 
     def _guard_limits(self, threshold: float) -> np.ndarray:
@@ -161,7 +175,7 @@ class ClothSolver:
         if self._guard_lim2[0] != threshold:
             m = self.model
             lim = (1.0 + threshold) * m.rest
-            lim2 = np.where(self.active, lim * lim * (1.0 - 1e-9), np.inf)[m.runs.fast.perm]
+            lim2 = np.where(self.active, lim * lim * (1.0 - 1e-9), np.inf)[self.runs.fast.perm]
             self._guard_lim2 = (threshold, np.ascontiguousarray(lim2))
         return self._guard_lim2[1]
 
@@ -175,8 +189,6 @@ class ClothSolver:
         if dt > model.dt_bound * (1 + 1e-9) and not self.force_dt:
             raise InputError(f"time step {dt * 1e3:.3f} ms exceeds the stability bound of eq. 4 "
                              f"({model.dt_bound * 1e3:.3f} ms)")
-        if "runs" not in model.__dict__:  # same springs: the force pass's order (a cached_property)
-            model.__dict__["runs"] = old.runs
         self.model, self.dt = model, float(dt)
         self.collide_every = model.params.collide_every
         self._sprops = self._spring_props(model)
@@ -190,7 +202,7 @@ class ClothSolver:
         t0 = time.perf_counter()
         # forces (eq. 2, gravity, damping, reaction eq. 16) and v += dt a (eq. 3); the same pass
         # lists the over-elongated springs for the velocity modification
-        r = m.runs
+        r = self.runs
         n_over = K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, r.springs, r.perm, r.runs, r.n_run,
                                              self._sprops, g, p.damping * damping_scale,
                                              self.contact, self.contact_n, m.fabric.friction * friction_scale, dt,
@@ -199,7 +211,7 @@ class ClothSolver:
                                              self._listed_words, self._geo_s, r.r_fast, r.n_fast, r.n_run_slow,
                                              self.iterations % p.flexion_every == 0 or not self._slow_held,
                                              self._f_slow,
-                                             self._one, self._tiny)
+                                             self._one, self._tiny, r.r_held)
         self._slow_held = True
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 §3)
         n_act = K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,

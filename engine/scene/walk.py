@@ -124,6 +124,10 @@ class WalkOptions:
     # Spring forces in single precision (ClothSolver.single_precision_forces; velocities and
     # positions stay double). False: double, as the drape.
     single_precision_forces: bool = True
+    # The shear springs' forces evaluated with the flexion springs', every flexion_every steps
+    # (ClothSolver.hold_shear; they are still listed for the strain limit every step). False:
+    # every step, as the drape.
+    hold_shear: bool = True
     collision: str = "image"  # or "object": the BVH baseline (engine.collide.moving.TrackObjectCollider)
     friction: float = 1.0  # x the fabric's cloth-body friction (engine.scene.arms lowers arms without it)
 
@@ -288,6 +292,8 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
     solver = ClothSolver(model, collider, dt=dt)
     if o.single_precision_forces:
         solver.single_precision_forces()
+    if o.hold_shear:
+        solver.hold_shear()
     state = ClothState(drape.state.x.copy(), drape.state.v.copy())
     frames = np.empty((n_frames + 1, model.n, 3), np.float32)
     frames[0] = state.x
