@@ -292,7 +292,16 @@ class SpinServer:
         if not self._thread.is_alive():  # (it died: an error said so already)
             self._args = None
             return
-        self.wait()
+        try:
+            self.wait()
+        except SimulationError:
+            if self._thread.is_alive():
+                raise
+            # it died while this waited (a kernel that raised is still "alive" while its
+            # traceback prints): what it held was answered or reported by the poster's wait
+            # for its chunks (wait_chunks), so there is nothing to wait for
+            self._args = None
+            return
         if self.ctl[RUNNING]:
             self.ctl[STOP] = 1
             self._spin(RUNNING, 0)
