@@ -60,21 +60,6 @@ def _scatter_run(fx, fy, fz, tx, ty, tz, a0, b0, m):
 
 
 @njit(fastmath=True, cache=True, inline="always")
-def _longer_in_run(xs, ys, zs, a0, b0, m, lim2):
-    """How many springs of the run (a0 + t, b0 + t), t < m, are longer than the square root of
-    lim2[t] (positions in rows xs, ys, zs) -- a reduction, which stays a vector loop."""
-    xa, ya, za = xs[a0:a0 + m], ys[a0:a0 + m], zs[a0:a0 + m]
-    xb, yb, zb = xs[b0:b0 + m], ys[b0:b0 + m], zs[b0:b0 + m]
-    over = 0
-    for t in range(m):
-        dx = xb[t] - xa[t]
-        dy = yb[t] - ya[t]
-        dz = zb[t] - za[t]
-        over += dx * dx + dy * dy + dz * dz > lim2[t]
-    return over
-
-
-@njit(fastmath=True, cache=True, inline="always")
 def _single_spring(s, sp, xs, ys, zs, vx, vy, vz, rest, k, spring_c, fx, fy, fz):
     """Spring s (outside runs) added to the forces; returns its length and vector."""
     a = sp[s, 0]
@@ -105,8 +90,8 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
     half of eq. 3: v += dt f / m. f_out keeps the force for diagnostics.
 
     The springs come in the order of engine.cloth.model.SpringRuns (sp, perm, runs, n_run;
-    sprops (5, S): rest length, stiffness, damping, the length past which the spring is
-    listed (below; inf for a spring the strain limit leaves alone) and its square, in that order): most lie in runs
+    sprops (4, S): rest length, stiffness, damping and the length past which the spring is
+    listed (below; inf for a spring the strain limit leaves alone), in that order): most lie in runs
     (a0 + t, b0 + t), t < L -- a row of the grid against the next one -- so positions and
     velocities are copied into soa (9, N: x, y, z, vx, vy, vz, fx, fy, fz) and each run is one
     loop over contiguous slices, which LLVM turns into vector instructions (no gathers); its
@@ -183,10 +168,16 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
     n_act = 0
     for r in range(r_held, r_fast):  # held runs: listed only
         s0, a0, b0, m = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3]
-        if _longer_in_run(xs, ys, zs, a0, b0, m, sprops[4, s0:s0 + m]):
-            xa, ya, za = xs[a0:a0 + m], ys[a0:a0 + m], zs[a0:a0 + m]
-            xb, yb, zb = xs[b0:b0 + m], ys[b0:b0 + m], zs[b0:b0 + m]
-            lim_ = limits[s0:s0 + m]
+        xa, ya, za = xs[a0:a0 + m], ys[a0:a0 + m], zs[a0:a0 + m]
+        xb, yb, zb = xs[b0:b0 + m], ys[b0:b0 + m], zs[b0:b0 + m]
+        lim_ = limits[s0:s0 + m]
+        over = 0
+        for t in range(m):
+            dx = xb[t] - xa[t]
+            dy = yb[t] - ya[t]
+            dz = zb[t] - za[t]
+            over += dx * dx + dy * dy + dz * dz > lim_[t] * lim_[t]
+        if over:
             for t in range(m):
                 dx = xb[t] - xa[t]
                 dy = yb[t] - ya[t]
@@ -586,10 +577,16 @@ def guard_positions(x, v, springs, rest, active, threshold, inv_mass, passes, wo
     any_long = False
     for r in range(runs.shape[0]):
         s0, a0, b0, m = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3]
-        if _longer_in_run(xs, ys, zs, a0, b0, m, lim2[s0:s0 + m]):
-            xa, ya, za = xs[a0:a0 + m], ys[a0:a0 + m], zs[a0:a0 + m]
-            xb, yb, zb = xs[b0:b0 + m], ys[b0:b0 + m], zs[b0:b0 + m]
-            g = lim2[s0:s0 + m]
+        xa, ya, za = xs[a0:a0 + m], ys[a0:a0 + m], zs[a0:a0 + m]
+        xb, yb, zb = xs[b0:b0 + m], ys[b0:b0 + m], zs[b0:b0 + m]
+        g = lim2[s0:s0 + m]
+        over = 0
+        for t in range(m):
+            dx = xb[t] - xa[t]
+            dy = yb[t] - ya[t]
+            dz = zb[t] - za[t]
+            over += dx * dx + dy * dy + dz * dz > g[t]
+        if over:
             any_long = True
             for t in range(m):
                 dx = xb[t] - xa[t]

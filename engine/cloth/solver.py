@@ -162,13 +162,10 @@ class ClothSolver:
         self._guard_lim2 = (None, None)
 
     def _spring_props(self, model: ClothModel) -> np.ndarray:
-        """(5, S) rest, stiffness, damping, strain limit (inf: not limited) and its square, in the
-        force pass's order."""
+        """(4, S) rest, stiffness, damping, strain limit (inf: not limited) in the force pass's order."""
         limit = np.where(self.active, (1.0 + model.fabric.strain_threshold) * model.rest, np.inf)
-        props = np.ascontiguousarray(np.stack([model.rest, model.stiffness, model.spring_c, limit, limit])[:, self.runs.perm],
-                                     dtype=self._fdtype)
-        props[4] *= props[4]  # (squared in the pass's precision: the listing compares it with squared lengths)
-        return props
+        return np.ascontiguousarray(np.stack([model.rest, model.stiffness, model.spring_c, limit])[:, self.runs.perm],
+                                    dtype=self._fdtype)
 
     def _guard_limits(self, threshold: float) -> np.ndarray:
         """The squared lengths past which K.guard_positions flags a spring (the force pass's
