@@ -146,6 +146,31 @@ def test_with_stiffness_scales_stretch_and_shear_only(model):
             with_stiffness(model, bad)
 
 
+def test_with_stiffness_can_lift_the_damping_cap(model):
+    """The walk's damping cap (with_stiffness' damping_cap): each spring's damping is what the
+    params ask (a fraction of critical) or the cap x m / (dt degree), whichever is less -- so a
+    cap twice as high doubles the capped springs' damping and leaves the others; the springs,
+    masses and the eq. 4 step stay. At the drape's own cap nothing changes."""
+    from engine.cloth.model import DAMPING_CAP
+
+    soft = with_stiffness(model, 0.25)
+    more = with_stiffness(model, 0.25, damping_cap=2 * DAMPING_CAP)
+    assert np.array_equal(more.stiffness, soft.stiffness) and np.array_equal(more.mass, soft.mass)
+    assert more.dt_bound == soft.dt_bound
+    a, b = model.springs[:, 0], model.springs[:, 1]
+    asked = model.params.spring_damping * 2.0 * np.sqrt(soft.stiffness * np.minimum(soft.mass[a], soft.mass[b]))
+    capped = soft.spring_c < asked * (1 - 1e-12)
+    assert capped.mean() > 0.3  # the stretch springs at a quarter of their stiffness
+    np.testing.assert_allclose(more.spring_c, np.minimum(asked, 2 * soft.spring_c), rtol=1e-12)
+    assert np.all(more.spring_c <= asked * (1 + 1e-12))
+    np.testing.assert_array_equal(more.spring_c[~capped], soft.spring_c[~capped])
+    same = with_stiffness(model, 1.0, damping_cap=DAMPING_CAP)
+    assert same is not model and np.array_equal(same.spring_c, model.spring_c)
+    for bad in (0.0, 1.5):
+        with pytest.raises(InputError, match="damping cap"):
+            with_stiffness(model, 0.25, damping_cap=bad)
+
+
 def test_restiffen_goes_on_as_a_solver_made_for_the_new_model(model, garment):
     """Changing the springs mid-run (the walk's stiffening) continues exactly as a fresh solver
     on the new model would from the same state; a model with other springs, or a step above

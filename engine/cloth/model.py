@@ -48,6 +48,7 @@ STRUCTURAL, SHEAR, FLEXION = 0, 1, 2
 EQ4_FACTOR = 0.4 * np.pi
 MASS_FLOOR = 0.5
 MASS_SCALE_PERCENTILE = 5.0
+DAMPING_CAP = 0.25  # a spring's damping is at most this x m / (dt degree): see _assemble
 
 
 @dataclass(frozen=True)
@@ -391,7 +392,8 @@ def spring_stiffness(kind: np.ndarray, fabric: Fabric, params: ClothParams, h: f
                     np.where(kind == SHEAR, fabric.shear * params.stiffness_scale, fabric.bending / (h * h)))
 
 
-def _assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, h) -> ClothModel:
+def _assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, h,
+              damping_cap: float = DAMPING_CAP) -> ClothModel:
     a, b = springs[:, 0], springs[:, 1]
     k_point = np.maximum(np.bincount(a, k, len(mass)) + np.bincount(b, k, len(mass)), 1e-12)
     # selective mass scaling: the points whose m / K is below the MASS_SCALE_PERCENTILE-th
@@ -405,9 +407,10 @@ def _assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, 
     m_ab = np.minimum(mass[a], mass[b])
     c = params.spring_damping * 2.0 * np.sqrt(k * m_ab)
     # explicit stability of the damping term at the eq. 4 step: the relative velocity of a
-    # point against its neighbours may lose at most half of itself per step
+    # point against its neighbours may lose at most half of itself per step (damping_cap 0.25;
+    # the walk's softer springs take 0.5: with_stiffness)
     degree = np.bincount(a, minlength=len(mass)) + np.bincount(b, minlength=len(mass))
-    c_max = 0.25 * m_ab / (dt_bound * np.maximum(degree[a], degree[b]))
+    c_max = damping_cap * m_ab / (dt_bound * np.maximum(degree[a], degree[b]))
     c = np.minimum(c, c_max)
     return ClothModel(mass=mass, inv_mass=1.0 / mass, springs=springs, rest=rest, stiffness=k, kind=kind,
                       spring_c=c,
@@ -415,18 +418,21 @@ def _assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, 
                       seams=seams, fabric=fabric, params=params, dt_bound=dt_bound, edge_length=h)
 
 
-def with_stiffness(model: ClothModel, factor: float) -> ClothModel:
+def with_stiffness(model: ClothModel, factor: float, damping_cap: float | None = None) -> ClothModel:
     """The model with its stretch and shear springs `factor` x as stiff (flexion unchanged: it is
     the fabric's bending), the spring damping and the eq. 4 bound following (dt ~ 1 / sqrt(factor)
-    where stretch sets it). Masses, springs and rest lengths stay."""
+    where stretch sets it). Masses, springs and rest lengths stay. damping_cap: the cap on each
+    spring's damping, as _assemble's (None: DAMPING_CAP, the drape's)."""
     if not (factor > 0 and np.isfinite(factor)):
         raise InputError(f"stiffness factor must be positive, got {factor}")
-    if factor == 1.0:
+    if damping_cap is not None and not (0.0 < damping_cap <= 1.0):
+        raise InputError(f"damping cap {damping_cap}: use 0 .. 1")
+    if factor == 1.0 and damping_cap is None:
         return model
     k = np.where(model.kind == FLEXION, model.stiffness, model.stiffness * factor)
     params = replace(model.params, stiffness_scale=model.params.stiffness_scale * factor)
     return _assemble(model.mass, model.springs, model.rest, k, model.kind, model.quads, model.tris, model.seams,
-                     model.fabric, params, model.edge_length)
+                     model.fabric, params, model.edge_length, DAMPING_CAP if damping_cap is None else damping_cap)
 
 
 def seam_flexion(uv: np.ndarray, springs: np.ndarray, kind: np.ndarray, rest: np.ndarray,
