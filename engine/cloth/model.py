@@ -210,30 +210,21 @@ def spring_runs(springs: np.ndarray, min_run: int = MIN_RUN, slow: np.ndarray | 
     that order where a goes up by one each spring. slow: (S,) bool, the springs of the slow group
     (see SpringRuns), ordered the same way after the others. held: (S,) bool, fast springs whose
     forces go with the slow group's (SpringRuns; the walk's shear springs)."""
-    if held is not None and held.any():
-        if slow is not None and (slow & held).any():
-            raise ValueError("spring_runs: a held spring is a fast one; it cannot be slow too")
-        fast = ~slow if slow is not None else np.ones(len(held), np.bool_)
-        fast_i = np.flatnonzero(fast)
-        f = _held_runs(springs[fast_i], held[fast_i], min_run)
-        if slow is None or not slow.any():
-            return f
-        slow_i = np.flatnonzero(slow)
+    held = held if held is not None and held.any() else None
+    if held is not None and slow is not None and (slow & held).any():
+        raise ValueError("spring_runs: a held spring is a fast one; it cannot be slow too")
+    if slow is not None and slow.any():
+        fast_i, slow_i = np.flatnonzero(~slow), np.flatnonzero(slow)
+        f = spring_runs(springs[fast_i], min_run, held=None if held is None else held[fast_i])
         w = spring_runs(springs[slow_i], min_run)
+        perm = np.concatenate([fast_i[f.perm], slow_i[w.perm]]).astype(np.int64)
         wr = w.runs.copy()
         wr[:, 0] += len(fast_i)
-        perm = np.concatenate([fast_i[f.perm], slow_i[w.perm]]).astype(np.int64)
         return SpringRuns(perm=perm, springs=springs[perm].astype(np.int32), runs=np.concatenate([f.runs, wr]),
                           n_run=f.n_run, r_fast=len(f.runs), n_fast=len(fast_i), n_run_slow=w.n_run,
                           r_held=f.r_held)
-    if slow is not None and slow.any():
-        fast_i, slow_i = np.flatnonzero(~slow), np.flatnonzero(slow)
-        f, w = spring_runs(springs[fast_i], min_run), spring_runs(springs[slow_i], min_run)
-        perm = np.concatenate([fast_i[f.perm], slow_i[w.perm]]).astype(np.int64)
-        wr = w.runs.copy()
-        wr[:, 0] += len(fast_i)
-        return SpringRuns(perm=perm, springs=springs[perm].astype(np.int32), runs=np.concatenate([f.runs, wr]),
-                          n_run=f.n_run, r_fast=len(f.runs), n_fast=len(fast_i), n_run_slow=w.n_run)
+    if held is not None:
+        return _held_runs(springs, held, min_run)
     s = springs.astype(np.int64).reshape(-1, 2)
     d = s[:, 1] - s[:, 0]
     order = np.lexsort((s[:, 0], d))
