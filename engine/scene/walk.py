@@ -355,7 +355,8 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
     # for milliseconds after each query -- in the walk's frames they took cores from the solver
     # and its query server (measured on the dress, 3,883 vertices, 4 s, scripts/bench_ab.py
     # --walk, three interleaved rounds: the same walk bit for bit, 0.87 x the ms per frame of
-    # checking each frame in the loop; realtime 0.729 against 0.652, medians).
+    # checking each frame in the loop; realtime 0.729 against 0.652, medians -- three rounds on
+    # this machine overstate: six rounds of it with the held shear springs gave 0.94 x).
     tp = time.perf_counter()
     progress("penetration", 0.0, "checking every frame against the body")
     exact = None
