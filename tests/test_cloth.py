@@ -1077,6 +1077,99 @@ def test_guard_positions_is_the_plain_guard_bit_for_bit(garment):
     np.testing.assert_array_equal(v3, v0)
 
 
+def test_the_late_guard_finds_and_makes_what_guard_positions_does(garment):
+    """ClothSolver.late_guard: K.guard_listed, flagging from the force pass's list of long
+    springs (single precision lengths, held shear springs: the walk's solver), gives exactly
+    what K.guard_positions gives on the same positions and velocities -- on a cloth stretched
+    unevenly, some points touching a body -- and then the listed springs whose ends moved are
+    measured again (one no longer long is left alone: excess -1e30; so may be, in double, one
+    whose end the guard looked at and did not move); the flag and point buffers are clear
+    afterwards."""
+    m = _model(garment)
+    rng = np.random.default_rng(7)
+    x0 = garment.positions * np.array([1.05, 1.0, 1.0]) + rng.normal(0.0, 0.0005, garment.positions.shape)
+    v0 = rng.normal(0.0, 0.3, x0.shape)
+    contact = rng.random(m.n) < 0.2
+    normal = np.zeros((m.n, 3))
+    normal[:, 1] = 1.0
+    solver = ClothSolver(m)
+    solver.single_precision_forces()
+    solver.hold_shear()
+    solver.late_guard()
+    solver.contact[:], solver.contact_n[:] = contact, normal
+    state = ClothState(x0.copy(), v0.copy())
+    n_over = solver._forces(state, GRAVITY, 1.0, 1.0)
+    assert n_over > 50
+    listed, geo_before = solver.vm_work[:n_over].copy(), solver.vm_geo[:n_over].copy()
+    thr = m.fabric.strain_threshold + 0.02
+    x1, v1, w1 = state.x.copy(), state.v.copy(), np.zeros(len(m.springs), np.int32)
+    plain = ClothSolver(m)
+    r = plain.runs
+    active = m.kind != FLEXION
+    n1 = K.guard_positions(x1, v1, m.springs, m.rest, active, thr, m.inv_mass, 6, w1, contact, normal,
+                           0.0003, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run, plain._guard_limits(thr), plain._soa,
+                           plain._listed, plain._listed_words, m.adj_ptr, m.adj_spring, plain.x_guard,
+                           plain._saved, plain._saved_list)
+    assert n1 > 10
+    n2 = K.guard_listed(state.x, state.v, m.springs, m.rest, active, thr, m.inv_mass, 6, solver._guard_work,
+                        contact, normal, 0.0003, solver._listed, solver._listed_words, m.adj_ptr, m.adj_spring,
+                        solver.x_guard, solver._saved, solver._saved_list, solver.vm_work, solver.vm_geo, n_over,
+                        *solver._late_limits(thr), m.fabric.strain_threshold)
+    assert n2 == n1
+    np.testing.assert_array_equal(solver._guard_work[:n2], w1[:n1])
+    np.testing.assert_array_equal(state.x, x1)
+    np.testing.assert_array_equal(state.v, v1)
+    assert not solver._listed.any() and not solver._saved.any()
+    # the list itself is kept; its geometry is new where an end moved
+    np.testing.assert_array_equal(solver.vm_work[:n_over], listed)
+    a, b = m.springs[listed, 0], m.springs[listed, 1]
+    moved = np.any(x1[a] != x0[a], axis=1) | np.any(x1[b] != x0[b], axis=1)
+    assert 10 < moved.sum() < n_over - 10
+    geo = solver.vm_geo[:n_over]
+    d = x1[b] - x1[a]
+    length = np.linalg.norm(d, axis=1)
+    excess = length - (1.0 + m.fabric.strain_threshold) * m.rest[listed]
+    fresh = np.where((excess > 0)[:, None], np.column_stack([d / length[:, None], excess]), -1e30)
+    close = lambda g, h: np.all(np.abs(g - h) <= 1e-12, axis=1) | ((g[:, 3] == -1e30) & (h[:, 3] == -1e30))
+    kept = np.all(geo == geo_before, axis=1)
+    assert np.all(close(geo[moved], fresh[moved]))  # measured again ...
+    assert np.all(kept[~moved] | close(geo[~moved], fresh[~moved]))  # (an end the sweep saved and did not move)
+    assert np.allclose(geo[~moved], geo_before[~moved], rtol=0, atol=2e-5)  # (single against double)
+    assert (moved & (excess > 0)).sum() > 3 and (moved & (excess <= 0)).sum() > 3
+    # the velocity modification leaves a spring with that excess alone
+    vv = state.v.copy()
+    k = int(np.flatnonzero(moved & (excess <= 0))[0])
+    s = listed[k]
+    assert K.modify_velocities(state.x, vv, m.springs[s:s + 1], m.rest[s:s + 1], active[s:s + 1],
+                               m.fabric.strain_threshold, K.VM_AVERAGE, GRAVITY, solver.dt, solver.body_v, 3,
+                               np.zeros(1, np.int32), geo[k:k + 1].copy(), 0.002, 1) == 1
+    np.testing.assert_array_equal(vv, state.v)
+
+
+def test_a_late_guarded_step_guards_what_it_integrated(garment):
+    """With late_guard a step leaves its positions to the next step's force pass (pending);
+    finish_guard guards them as guard_positions would, and nothing is pending after."""
+    m = _model(garment)
+    rng = np.random.default_rng(3)
+    x0 = garment.positions * np.array([1.09, 1.0, 1.02]) + rng.normal(0.0, 0.0008, garment.positions.shape)
+    solver = ClothSolver(replace(m, params=replace(m.params, strain_guard=0.02)))
+    solver.late_guard()
+    state = ClothState(x0.copy(), np.zeros_like(x0))
+    solver.step(state)
+    assert solver.guard_pending
+    thr = m.fabric.strain_threshold + 0.02
+    xs = state.x.copy()
+    strain = lambda x: np.linalg.norm(x[m.springs[:, 1]] - x[m.springs[:, 0]], axis=1) / m.rest - 1.0
+    assert strain(xs)[m.kind != FLEXION].max() > thr + 0.01
+    solver.finish_guard(state)
+    assert not solver.guard_pending and solver.guarded > 50
+    assert strain(state.x)[m.kind != FLEXION].max() < strain(xs)[m.kind != FLEXION].max()
+    solver.finish_guard(state)  # nothing pending: nothing moves
+    x_after = state.x.copy()
+    solver.finish_guard(state)
+    np.testing.assert_array_equal(state.x, x_after)
+
+
 def test_strain_guard_shortens_a_spring_a_little_at_a_time():
     """The guard moves positions by at most max_move a spring a pass, so a spring stretched 3 mm
     past its limit (cloth torn over a body part) is brought back over several steps, not in one

@@ -64,6 +64,11 @@ def test_serial_kernels_compile_without_parallel_loops():
                       solver.contact, solver.contact_n, 0.001, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run,
                       solver._guard_limits(0.05), solver._soa, solver._listed, solver._listed_words, m.adj_ptr,
                       m.adj_spring, solver.x_guard, solver._saved, solver._saved_list)
+    solver.late_guard()
+    K.guard_listed(state.x, state.v, m.springs, m.rest, solver.active, 0.05, m.inv_mass, 2, solver._guard_work,
+                   solver.contact, solver.contact_n, 0.001, solver._listed, solver._listed_words, m.adj_ptr,
+                   m.adj_spring, solver.x_guard, solver._saved, solver._saved_list, solver.vm_work, solver.vm_geo, 0,
+                   *solver._late_limits(0.05), 0.03)
     # the response on its own (the solver's contact_rounds does the same work; tests/test_cloth.py
     # compares them), on the last step's points
     npt = len(solver.points)
@@ -100,7 +105,7 @@ def test_serial_kernels_compile_without_parallel_loops():
             assert not diag.initial_parfors, f"{name} has a parallel loop (array expression / np.zeros?)"
         checked.append(name)
     for must in ("modify_velocities", "eval_forces_and_integrate", "collision_response", "query_batch_serial",
-                 "pull_seams", "inelastic_guard", "guard_positions", "_finish_maps"):
+                 "pull_seams", "inelastic_guard", "guard_positions", "guard_listed", "_finish_maps"):
         assert any(n.endswith("." + must) for n in checked), (must, checked)
 
 

@@ -605,6 +605,19 @@ def guard_positions(x, v, springs, rest, active, threshold, inv_mass, passes, wo
             any_long = True
     if not any_long:
         return 0
+    n_act, n_saved = _guard_sweep(x, springs, rest, active, threshold, inv_mass, passes, work, contact, contact_n,
+                                  max_move, flags, flag_words, adj_ptr, adj_spring, x_before, saved, saved_list)
+    _guard_release(x, x_before, v, saved, saved_list, n_saved, n_act)
+    return n_act
+
+
+@njit(fastmath=True, cache=True, inline="always")
+def _guard_sweep(x, springs, rest, active, threshold, inv_mass, passes, work, contact, contact_n, max_move,
+                 flags, flag_words, adj_ptr, adj_spring, x_before, saved, saved_list):
+    """The strain guard's projections (guard_positions) over the flagged springs (flags, a
+    superset of the long ones), in the model's order; a projection flags the later springs at
+    both of its ends. Saves the positions of the points it moves (x_before; saved, saved_list)
+    and clears the flags. Returns (springs projected -- listed in work --, points saved)."""
     n_act = 0
     n_saved = 0
     n_springs = springs.shape[0]
@@ -636,11 +649,61 @@ def guard_positions(x, v, springs, rest, active, threshold, inv_mass, passes, wo
                             flags[j] = 1
     _project_passes(x, springs, rest, threshold, inv_mass, passes - 1, work, n_act, True, contact, contact_n,
                     max_move)
+    return n_act, n_saved
+
+
+@njit(fastmath=True, cache=True, inline="always")
+def _guard_release(x, x_before, v, saved, saved_list, n_saved, n_act):
+    """After _guard_sweep: clear the saved marks and, if anything was projected, the inelastic
+    guard on the saved points."""
     for k in range(n_saved):
         i = saved_list[k]
         saved[i] = 0
         if n_act:
             _inelastic_one(x, x_before, v, i)
+
+
+@serial_kernel
+def guard_listed(x, v, springs, rest, active, threshold, inv_mass, passes, work, contact, contact_n, max_move,
+                 flags, flag_words, adj_ptr, adj_spring, x_before, saved, saved_list,
+                 listed, listed_geo, n_listed, near_excess, lim2, listed_threshold):
+    """The strain guard of guard_positions (the same projections and inelastic guard, bit for
+    bit, on the same positions) found from a list instead of a pass over every spring: the
+    springs the force pass listed for the velocity modification (listed[:n_listed], their
+    excess over the listing length, (1 + listed_threshold) rest, in listed_geo[:, 3]; see
+    eval_forces_and_integrate). Those whose excess passes near_excess (per spring, by model
+    index: half the guard's, far above the error of the list's single precision lengths) are
+    measured in double and flagged past lim2 (by model index: a hair below ((1 + threshold)
+    rest)^2, as guard_positions flags). Then the listed springs at the points the guard looked
+    at are measured again (listed_geo, in double; one no longer long gets an excess of -1e30,
+    which the velocity modification leaves alone).
+    For a step that guards right after its force pass (ClothSolver.late_guard). `work` gets
+    the projected springs: it must not be `listed`. Returns the number projected."""
+    any_long = False
+    for k in range(n_listed):
+        s = listed[k]
+        if listed_geo[k, 3] > near_excess[s]:
+            a = springs[s, 0]
+            b = springs[s, 1]
+            dx = x[b, 0] - x[a, 0]
+            dy = x[b, 1] - x[a, 1]
+            dz = x[b, 2] - x[a, 2]
+            if dx * dx + dy * dy + dz * dz > lim2[s]:
+                flags[s] = 1
+                any_long = True
+    if not any_long:
+        return 0
+    n_act, n_saved = _guard_sweep(x, springs, rest, active, threshold, inv_mass, passes, work, contact, contact_n,
+                                  max_move, flags, flag_words, adj_ptr, adj_spring, x_before, saved, saved_list)
+    if n_act:
+        for k in range(n_listed):
+            s = listed[k]
+            a = springs[s, 0]
+            b = springs[s, 1]
+            if saved[a] or saved[b]:
+                if not _spring_geo(x, a, b, (1.0 + listed_threshold) * rest[s], listed_geo, k):
+                    listed_geo[k, 3] = -1e30
+    _guard_release(x, x_before, v, saved, saved_list, n_saved, n_act)
     return n_act
 
 

@@ -119,6 +119,9 @@ class ClothSolver:
         self._saved = np.zeros(n, dtype=np.uint8)  # ... which points those are
         self._saved_list = np.zeros(n, dtype=np.int32)
         self._guard_lim2 = (None, None)  # (threshold, squared lengths the guard looks past, run order)
+        self._late = None  # late_guard: (threshold, the excess past which a listed spring is flagged)
+        self._guard_work = None  # ... and the springs it projects
+        self.guard_pending = False  # late_guard: positions integrated and not yet guarded
         self.recover = p.recover  # ... and the strain recovery (it would fight the seam pull)
         self.collide_every = p.collide_every  # steps between collision checks (the drape sets it per stage)
         self.sewing = None  # (pairs, welded, tau, vmax) while sewing: see engine.cloth.welds
@@ -161,6 +164,55 @@ class ClothSolver:
         self._use_precision(self._fdtype)
         self._guard_lim2 = (None, None)
 
+    def late_guard(self) -> None:
+        """Run the strain guard at the start of the next step, right after its force pass,
+        instead of at the end of this one: the force pass measures every spring on those same
+        positions and lists the long ones for the velocity modification, and the guard's long
+        springs are among them (K.guard_listed), so the guard's own pass over every spring
+        goes (K.guard_positions; measured on eight captured walking steps of the dress, 3,883
+        vertices: guard_positions 20-36 us, ~17.5 of them that pass; guard_listed 11-21 us;
+        a walking step takes ~300 us). The guard
+        gives the same positions it would have given; what differs is that the next step's
+        forces are taken before it (a spring past threshold + guard pulls for one step) and
+        that the listed springs the guard moved are measured again for the velocity
+        modification (one made long by a projection waits a step).
+        Positions read between steps are then not guarded yet (guard_pending): finish_guard
+        guards them (the walk does at the end of every frame). The walk uses it; the drape
+        does not."""
+        self._late = (None, None)
+        self._guard_work = np.zeros(len(self.model.springs), dtype=np.int32)
+
+    def finish_guard(self, state: ClothState) -> None:
+        """With late_guard: the strain guard of the last step's positions, now (K.guard_positions)."""
+        if self.guard_pending:
+            t0 = time.perf_counter()
+            self._guard(state)
+            self.timing["cloth"] += time.perf_counter() - t0
+        self.guard_pending = False
+
+    def _guard(self, state: ClothState) -> None:
+        """The strain guard (K.guard_positions) of state's positions."""
+        m, p, r = self.model, self.model.params, self.runs
+        thr = m.fabric.strain_threshold + self.strain_guard
+        self.guarded = K.guard_positions(state.x, state.v, m.springs, m.rest, self.active, thr, m.inv_mass,
+                                         p.vm_passes, self.vm_work, self.contact, self.contact_n, p.guard_step,
+                                         r.fast.perm, r.fast.runs, r.fast.springs, r.n_run,
+                                         self._guard_limits(thr), self._soa,
+                                         self._listed, self._listed_words, m.adj_ptr, m.adj_spring,
+                                         self.x_guard, self._saved, self._saved_list)
+
+    def _late_limits(self, threshold: float) -> tuple[np.ndarray, np.ndarray]:
+        """late_guard's near_excess and lim2 (K.guard_listed; by model index): half the excess
+        over the listing length at which a spring passes the guard's threshold, and a hair
+        below that length squared (inf for the springs the strain limit leaves alone)."""
+        if self._late[0] != threshold:
+            m = self.model
+            near = 0.5 * (threshold - m.fabric.strain_threshold) * m.rest
+            lim = (1.0 + threshold) * m.rest
+            lim2 = np.where(self.active, lim * lim * (1.0 - 1e-9), np.inf)
+            self._late = (threshold, (np.ascontiguousarray(near), np.ascontiguousarray(lim2)))
+        return self._late[1]
+
     def _spring_props(self, model: ClothModel) -> np.ndarray:
         """(4, S) rest, stiffness, damping, strain limit (inf: not limited) in the force pass's order."""
         limit = np.where(self.active, (1.0 + model.fabric.strain_threshold) * model.rest, np.inf)
@@ -193,16 +245,13 @@ class ClothSolver:
         self.collide_every = model.params.collide_every
         self._sprops = self._spring_props(model)
         self._guard_lim2 = (None, None)
+        if self._late is not None:
+            self._late = (None, None)
 
-    def step(self, state: ClothState, gravity_scale: float = 1.0, damping_scale: float = 1.0,
-             friction_scale: float = 1.0) -> None:
-        m, p, dt = self.model, self.model.params, self.dt
-        recover = max(self.recover, dt)  # work an excess off over at least one step (no overshoot)
-        g = self.gravity * gravity_scale
-        t0 = time.perf_counter()
-        # forces (eq. 2, gravity, damping, reaction eq. 16) and v += dt a (eq. 3); the same pass
-        # lists the over-elongated springs for the velocity modification
-        r = self.runs
+    def _forces(self, state: ClothState, g: np.ndarray, damping_scale: float, friction_scale: float) -> int:
+        """The force pass (K.eval_forces_and_integrate) on state: v += dt f / m; lists the
+        springs past the strain limit (vm_work, vm_geo) and returns their count."""
+        m, p, dt, r = self.model, self.model.params, self.dt, self.runs
         n_over = K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, r.springs, r.perm, r.runs, r.n_run,
                                              self._sprops, g, p.damping * damping_scale,
                                              self.contact, self.contact_n, m.fabric.friction * friction_scale, dt,
@@ -213,6 +262,26 @@ class ClothSolver:
                                              self._f_slow,
                                              self._one, self._tiny, r.r_held)
         self._slow_held = True
+        return n_over
+
+    def step(self, state: ClothState, gravity_scale: float = 1.0, damping_scale: float = 1.0,
+             friction_scale: float = 1.0) -> None:
+        m, p, dt = self.model, self.model.params, self.dt
+        recover = max(self.recover, dt)  # work an excess off over at least one step (no overshoot)
+        g = self.gravity * gravity_scale
+        t0 = time.perf_counter()
+        # forces (eq. 2, gravity, damping, reaction eq. 16) and v += dt a (eq. 3); the same pass
+        # lists the over-elongated springs for the velocity modification
+        n_over = self._forces(state, g, damping_scale, friction_scale)
+        if self.guard_pending:  # late_guard: the last step's positions, guarded from the force pass's list
+            thr = m.fabric.strain_threshold + self.strain_guard
+            self.guarded = K.guard_listed(state.x, state.v, m.springs, m.rest, self.active, thr, m.inv_mass,
+                                          p.vm_passes, self._guard_work, self.contact, self.contact_n, p.guard_step,
+                                          self._listed, self._listed_words, m.adj_ptr, m.adj_spring,
+                                          self.x_guard, self._saved, self._saved_list,
+                                          self.vm_work, self.vm_geo, n_over, *self._late_limits(thr),
+                                          m.fabric.strain_threshold)
+            self.guard_pending = False
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 §3)
         n_act = K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
                                     self.mode, g, dt, self.body_v, p.vm_passes,
@@ -252,13 +321,10 @@ class ClothSolver:
         elif self.strain_guard is not None:
             # what the velocity modification could not hold (the body pushing a band outward);
             # the velocity that would stretch the guarded springs again goes (K.guard_positions)
-            thr = m.fabric.strain_threshold + self.strain_guard
-            self.guarded = K.guard_positions(state.x, state.v, m.springs, m.rest, self.active, thr, m.inv_mass,
-                                             p.vm_passes, self.vm_work, self.contact, self.contact_n, p.guard_step,
-                                             r.fast.perm, r.fast.runs, r.fast.springs, r.n_run,
-                                             self._guard_limits(thr), self._soa,
-                                             self._listed, self._listed_words, m.adj_ptr, m.adj_spring,
-                                             self.x_guard, self._saved, self._saved_list)
+            if self._late is not None:
+                self.guard_pending = True  # (at the next step's force pass, or finish_guard)
+            else:
+                self._guard(state)
         t3 = time.perf_counter()
         self.timing["cloth"] += (t1 - t0) + (t3 - t2)
         self.iterations += 1

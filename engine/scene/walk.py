@@ -135,6 +135,11 @@ class WalkOptions:
     # x + 4 dt v missed where it was 4 steps later by 0.81 mm, median; 2.34 mm at the 90th
     # percentile). At 0.5: 0.02 mm.
     damping_cap: float = 0.5
+    # The strain guard run at the start of each step, from its force pass's list of long springs,
+    # instead of by a pass of its own over every spring at the end of the step before
+    # (ClothSolver.late_guard; the frames are guarded before they are written). False: as the
+    # drape.
+    late_guard: bool = True
     collision: str = "image"  # or "object": the BVH baseline (engine.collide.moving.TrackObjectCollider)
     friction: float = 1.0  # x the fabric's cloth-body friction (engine.scene.arms lowers arms without it)
 
@@ -303,6 +308,8 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
         solver.single_precision_forces()
     if o.hold_shear:
         solver.hold_shear()
+    if o.late_guard:
+        solver.late_guard()
     state = ClothState(drape.state.x.copy(), drape.state.v.copy())
     frames = np.empty((n_frames + 1, model.n, 3), np.float32)
     frames[0] = state.x
@@ -317,6 +324,7 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
                 if solver.checks_next():  # (the steps between checks do not ask the collider)
                     collider.set_time((i - 1 + (s + 1) / sub) * frame_time)
                 solver.step(state, friction_scale=o.friction)
+            solver.finish_guard(state)  # (late_guard: the frame's last step's guard)
             t_maps += collider.stats["map_seconds"] - m0
             t_cloth += solver.timing["cloth"] - c0
             t_coll += solver.timing["collision"] - k0
@@ -382,6 +390,7 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
         "collision_every_steps": every,
         "stiffness": {"start": o.stiffness, "end": stiffness, "stiffened": stiffened},
         "damping_cap": o.damping_cap,  # x m / (dt degree): the cap on each spring's damping
+        "late_guard": o.late_guard,  # the strain guard from the next force pass's list
         "contact_rounds": o.contact_rounds,
         "strain_guard": o.strain_guard,
         "velocity_mode": model.params.velocity_mode,
