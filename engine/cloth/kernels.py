@@ -458,18 +458,32 @@ def modify_velocities(x, v, springs, rest, active, threshold, mode, gravity, dt,
                 _modify_one(v, springs[s, 0], springs[s, 1], geo, n_act, mode, gravity, dt, body_v, recover)
                 n_act += 1
         passes -= 1
-    _modify_passes(v, springs, work, geo, n_act, mode, gravity, dt, body_v, passes, recover)
+    _modify_passes(v, _endpoints(springs, work, n_act), geo, n_act, mode, gravity, dt, body_v, passes, recover)
     return n_act
 
 
 @njit(fastmath=True, cache=True, inline="always")
-def _modify_passes(v, springs, work, geo, n_act, mode, gravity, dt, body_v, passes, recover):
-    """Up to `passes` Gauss-Seidel passes over the n_act listed springs, until one changes nothing."""
+def _endpoints(springs, work, n_act):
+    """The listed springs' ends, (n_act, 2): the passes read them from this small array instead
+    of from springs[work[k]] -- rows of the whole spring array, a cache line apart. Measured on
+    four captured walking steps of the dress (693-1,102 springs listed, six passes; interleaved,
+    2,000 calls each): modify_velocities 0.78-0.79 x the time, the same velocities bit for bit."""
+    ab = np.empty((n_act, 2), np.int32)
+    for k in range(n_act):
+        s = work[k]
+        ab[k, 0] = springs[s, 0]
+        ab[k, 1] = springs[s, 1]
+    return ab
+
+
+@njit(fastmath=True, cache=True, inline="always")
+def _modify_passes(v, ab, geo, n_act, mode, gravity, dt, body_v, passes, recover):
+    """Up to `passes` Gauss-Seidel passes over the n_act listed springs (ends ab, _endpoints),
+    until one changes nothing."""
     for _ in range(passes):
         changed = 0
         for k in range(n_act):
-            s = work[k]
-            if _modify_one(v, springs[s, 0], springs[s, 1], geo, k, mode, gravity, dt, body_v, recover):
+            if _modify_one(v, ab[k, 0], ab[k, 1], geo, k, mode, gravity, dt, body_v, recover):
                 changed += 1
         if changed == 0:
             break
@@ -925,9 +939,10 @@ def contact_rounds(v, springs, mode, gravity, dt, passes, work, geo, recover, n_
             _report_contact(i, p, normal, body_v, contact_n, vbody_out)
     acc = np.empty((n, 3))
     cnt = np.empty(n, dtype=np.int32)
+    ab = _endpoints(springs, work, n_act if rounds > 1 else 0)
     for rnd in range(rounds):
         if rnd > 0:
-            _modify_passes(v, springs, work, geo, n_act, mode, gravity, dt, vbody_out, passes, recover)
+            _modify_passes(v, ab, geo, n_act, mode, gravity, dt, vbody_out, passes, recover)
         for k in range(n_touch):
             i = touched_buf[k]
             acc[i, 0] = 0.0
