@@ -59,6 +59,7 @@ def test_serial_kernels_compile_without_parallel_loops():
     K.provot_positions(state.x, m.springs, m.rest, solver.active, 0.05, m.inv_mass, 2, solver.vm_work, False,
                        solver.contact, solver.contact_n)
     K.inelastic_guard(state.x, solver.x_guard, state.v)
+    K.hold_and_integrate(state.x, state.v, 1e-5, solver.contact, solver.contact_n, solver.body_v)
     r = m.runs
     K.guard_positions(state.x, state.v, m.springs, m.rest, solver.active, 0.05, m.inv_mass, 2, solver.vm_work,
                       solver.contact, solver.contact_n, 0.001, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run,
@@ -105,7 +106,8 @@ def test_serial_kernels_compile_without_parallel_loops():
             assert not diag.initial_parfors, f"{name} has a parallel loop (array expression / np.zeros?)"
         checked.append(name)
     for must in ("modify_velocities", "eval_forces_and_integrate", "collision_response", "query_batch_serial",
-                 "pull_seams", "inelastic_guard", "guard_positions", "guard_listed", "_finish_maps"):
+                 "pull_seams", "inelastic_guard", "guard_positions", "guard_listed", "hold_and_integrate",
+                 "_finish_maps"):
         assert any(n.endswith("." + must) for n in checked), (must, checked)
 
 

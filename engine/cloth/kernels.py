@@ -968,6 +968,17 @@ def contact_rounds(v, springs, mode, gravity, dt, passes, work, geo, recover, n_
     return hits
 
 
+@njit(fastmath=True, cache=True, inline="always")
+def _hold_one(v, i, contact_n, body_v):
+    """hold_contacts for vertex i (in contact)."""
+    nx, ny, nz = contact_n[i, 0], contact_n[i, 1], contact_n[i, 2]
+    vn = (v[i, 0] - body_v[i, 0]) * nx + (v[i, 1] - body_v[i, 1]) * ny + (v[i, 2] - body_v[i, 2]) * nz
+    if vn < 0.0:
+        v[i, 0] -= vn * nx
+        v[i, 1] -= vn * ny
+        v[i, 2] -= vn * nz
+
+
 @serial_kernel
 def hold_contacts(v, contact, contact_n, body_v):
     """Between two collision checks: a vertex in contact at the last check may not move into the
@@ -976,12 +987,19 @@ def hold_contacts(v, contact, contact_n, body_v):
     this step; the reaction force of eq. 16 only cancels forces)."""
     for i in range(v.shape[0]):
         if contact[i]:
-            nx, ny, nz = contact_n[i, 0], contact_n[i, 1], contact_n[i, 2]
-            vn = (v[i, 0] - body_v[i, 0]) * nx + (v[i, 1] - body_v[i, 1]) * ny + (v[i, 2] - body_v[i, 2]) * nz
-            if vn < 0.0:
-                v[i, 0] -= vn * nx
-                v[i, 1] -= vn * ny
-                v[i, 2] -= vn * nz
+            _hold_one(v, i, contact_n, body_v)
+
+
+@serial_kernel
+def hold_and_integrate(x, v, dt, contact, contact_n, body_v):
+    """hold_contacts, then integrate_positions, in one pass over the vertices (the same
+    arithmetic: each vertex's velocity is held before its position moves)."""
+    for i in range(x.shape[0]):
+        if contact[i]:
+            _hold_one(v, i, contact_n, body_v)
+        x[i, 0] += dt * v[i, 0]
+        x[i, 1] += dt * v[i, 1]
+        x[i, 2] += dt * v[i, 2]
 
 
 @serial_kernel

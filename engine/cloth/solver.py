@@ -310,11 +310,12 @@ class ClothSolver:
                                               p.tolerance, p.reflection, m.fabric.friction * friction_scale,
                                               self.contact, self.contact_n, self.body_v, self.hit_buf,
                                               self.touched_buf)
-        elif self.collider is not None:
-            K.hold_contacts(state.v, self.contact, self.contact_n, self.body_v)
         t2 = time.perf_counter()
         # positions (eq. 3); Provot's position modification when chosen as the comparison
-        K.integrate_positions(state.x, state.v, dt)
+        if not ahead and self.collider is not None:  # (hold_contacts in the same pass: counted as the cloth's)
+            K.hold_and_integrate(state.x, state.v, dt, self.contact, self.contact_n, self.body_v)
+        else:
+            K.integrate_positions(state.x, state.v, dt)
         if self.mode == K.VM_PROVOT:
             K.provot_positions(state.x, m.springs, m.rest, self.active, m.fabric.strain_threshold,
                                m.inv_mass, p.vm_passes, self.vm_work, False, self.contact, self.contact_n, np.inf)
