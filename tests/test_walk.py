@@ -533,7 +533,8 @@ def test_object_space_walk(walked):
                                                ("stiffness", 0.0, "stiffness"), ("stiffness", 1.5, "stiffness"),
                                                ("stiffen_at", 0.0, "stiffen_at"),
                                                ("collide_every", 17, "collide_every"),
-                                               ("vm_passes", 0, "vm_passes"), ("strain_guard", -0.1, "strain_guard")])
+                                               ("vm_passes", 0, "vm_passes"), ("strain_guard", -0.1, "strain_guard"),
+                                               ("flexion_every", 0, "flexion_every"), ("flexion_every", 17, "flexion_every")])
 def test_walk_options_refuse_absurd_solver_settings(field, value, words):
     from engine.errors import InputError
     from engine.scene.walk import WalkOptions

@@ -128,6 +128,11 @@ class WalkOptions:
     # (ClothSolver.hold_shear; they are still listed for the strain limit every step). False:
     # every step, as the drape.
     hold_shear: bool = True
+    # Steps between evaluations of the flexion springs' forces (and, with hold_shear, the shear
+    # springs'), held in between (ClothParams.flexion_every; the drape's: 4). At the walk's
+    # stiffness a shear spring's period is ~56 ms on the dress (cotton, 0.38 N/m, ~30 mg a
+    # point); 8 steps are 2.5 ms of it.
+    flexion_every: int = 8
     # The cap on each spring's damping (engine.cloth.model.with_stiffness; the drape's 0.25 x
     # m / (dt degree)). At the walk's quarter stiffness the drape's cap holds every stretch
     # spring's damping at 2 % of critical instead of the 30 % asked for, and the cloth rang:
@@ -152,6 +157,8 @@ class WalkOptions:
             raise InputError(f"vm_passes {self.vm_passes}: use 1 .. 100")
         if self.strain_guard is not None and not (0.0 <= self.strain_guard <= 0.5):
             raise InputError(f"strain_guard {self.strain_guard}: use 0 .. 0.5 (or None: off)")
+        if not (1 <= self.flexion_every <= 16):
+            raise InputError(f"flexion_every {self.flexion_every}: evaluate flexion springs every 1 .. 16 steps")
         if not (1 <= self.contact_rounds <= 16):
             raise InputError(f"contact_rounds {self.contact_rounds}: use 1 .. 16")
         if self.collide_every is not None and not (1 <= self.collide_every <= 16):
@@ -296,6 +303,7 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
         ev = o.collide_every if o.collide_every is not None else check_every(track, frame_time / n_sub)
         m = replace(m, params=replace(m.params, vm_passes=o.vm_passes, collide_every=ev,
                                       contact_rounds=o.contact_rounds, strain_guard=o.strain_guard,
+                                      flexion_every=o.flexion_every,
                                       velocity_mode=o.velocity_mode or m.params.velocity_mode))
         return m, n_sub, frame_time / n_sub, ev
 
@@ -391,6 +399,7 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
         "stiffness": {"start": o.stiffness, "end": stiffness, "stiffened": stiffened},
         "damping_cap": o.damping_cap,  # x m / (dt degree): the cap on each spring's damping
         "late_guard": o.late_guard,  # the strain guard from the next force pass's list
+        "flexion_every": o.flexion_every,  # steps between the flexion (and held shear) springs' forces
         "contact_rounds": o.contact_rounds,
         "strain_guard": o.strain_guard,
         "velocity_mode": model.params.velocity_mode,
