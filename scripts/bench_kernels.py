@@ -37,7 +37,7 @@ def main() -> None:
     v0 = rng.normal(size=(n, 3))
     rest = np.linalg.norm(x[springs[:, 1]] - x[springs[:, 0]], axis=1) * 0.9
     args = (springs, rest, np.ones(s, np.bool_), 0.05, K.VM_AVERAGE, np.array([0, -9.81, 0.0]), 1e-4,
-            np.zeros((n, 3)), 12, np.zeros(s, np.int32), np.zeros((s, 4)), 0.002)
+            np.zeros((n, 3)), 12, np.zeros(s, np.int32), np.zeros((s, 4)), np.zeros((s, 2), np.int32), 0.002)
     print(f"{'kernel':<28}{'plain @njit':>14}{'serial_kernel':>16}{'speed-up':>10}")
     out = {}
     for name, fn in (("plain", njit(fastmath=True)(K.modify_velocities.py_func)), ("serial", K.modify_velocities)):

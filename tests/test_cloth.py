@@ -379,7 +379,8 @@ def _vm(x, v, mode, threshold=0.1, recover=1e12, active=True, body_v=None):
     work = np.zeros(1, dtype=np.int32)
     body_v = np.zeros((2, 3)) if body_v is None else np.asarray(body_v, np.float64)
     return K.modify_velocities(x, v, springs, rest, np.array([active]), threshold, K.VM_MODES[mode],
-                               np.array([0.0, -9.81, 0.0]), 1e-4, body_v, 4, work, np.zeros((1, 4)), recover)
+                               np.array([0.0, -9.81, 0.0]), 1e-4, body_v, 4, work, np.zeros((1, 4)),
+                               np.zeros((1, 2), np.int32), recover)
 
 
 @pytest.mark.parametrize("recover", [1e12, ClothParams().recover])
@@ -917,7 +918,8 @@ def _force_pass(solver, x, v, damping, mu, dt, slow_due):
                                        dt, solver.f, solver.vm_work, solver.vm_geo, solver._fsoa, solver._run_tmp,
                                        solver._lengths, solver._listed, solver._listed_words,
                                        solver._geo_s, r.r_fast, r.n_fast, r.n_run_slow, slow_due, solver._f_slow,
-                                       solver._one, solver._tiny, r.r_held)
+                                       solver._one, solver._tiny, r.r_held, m.springs, solver.vm_ends,
+                                       solver._near, solver._near_frac())[0]
 
 
 # (relative error of the forces: double; single precision, ClothSolver.single_precision_forces --
@@ -1092,7 +1094,7 @@ def test_the_late_guard_finds_and_makes_what_guard_positions_does(garment):
     contact = rng.random(m.n) < 0.2
     normal = np.zeros((m.n, 3))
     normal[:, 1] = 1.0
-    solver = ClothSolver(m)
+    solver = ClothSolver(replace(m, params=replace(m.params, strain_guard=0.02)))
     solver.single_precision_forces()
     solver.hold_shear()
     solver.late_guard()
@@ -1102,6 +1104,14 @@ def test_the_late_guard_finds_and_makes_what_guard_positions_does(garment):
     assert n_over > 50
     listed, geo_before = solver.vm_work[:n_over].copy(), solver.vm_geo[:n_over].copy()
     thr = m.fabric.strain_threshold + 0.02
+    # the list comes with its springs' ends, and with those near the guard's length: every one
+    # past it among them
+    np.testing.assert_array_equal(solver.vm_ends[:n_over], m.springs[listed])
+    near = solver._near[:solver._n_near]
+    assert 0 < len(near) < n_over and np.all(np.diff(near) > 0)
+    ln = np.linalg.norm(x0[m.springs[listed, 1]] - x0[m.springs[listed, 0]], axis=1)
+    assert set(np.flatnonzero(ln > (1.0 + thr) * m.rest[listed])) <= set(near)
+    assert np.all(ln[near] > (1.0 + m.fabric.strain_threshold + 0.0099) * m.rest[listed[near]])
     x1, v1, w1 = state.x.copy(), state.v.copy(), np.zeros(len(m.springs), np.int32)
     plain = ClothSolver(m)
     r = plain.runs
@@ -1113,8 +1123,9 @@ def test_the_late_guard_finds_and_makes_what_guard_positions_does(garment):
     assert n1 > 10
     n2 = K.guard_listed(state.x, state.v, m.springs, m.rest, active, thr, m.inv_mass, 6, solver._guard_work,
                         contact, normal, 0.0003, solver._listed, solver._listed_words, m.adj_ptr, m.adj_spring,
-                        solver.x_guard, solver._saved, solver._saved_list, solver.vm_work, solver.vm_geo, n_over,
-                        *solver._late_limits(thr), m.fabric.strain_threshold)
+                        solver.x_guard, solver._saved, solver._saved_list, solver.vm_work, solver.vm_geo,
+                        solver.vm_ends, n_over, solver._near, solver._n_near, solver._late_limits(thr),
+                        m.fabric.strain_threshold)
     assert n2 == n1
     np.testing.assert_array_equal(solver._guard_work[:n2], w1[:n1])
     np.testing.assert_array_equal(state.x, x1)
@@ -1142,7 +1153,7 @@ def test_the_late_guard_finds_and_makes_what_guard_positions_does(garment):
     s = listed[k]
     assert K.modify_velocities(state.x, vv, m.springs[s:s + 1], m.rest[s:s + 1], active[s:s + 1],
                                m.fabric.strain_threshold, K.VM_AVERAGE, GRAVITY, solver.dt, solver.body_v, 3,
-                               np.zeros(1, np.int32), geo[k:k + 1].copy(), 0.002, 1) == 1
+                               np.zeros(1, np.int32), geo[k:k + 1].copy(), m.springs[s:s + 1].copy(), 0.002, 1) == 1
     np.testing.assert_array_equal(vv, state.v)
 
 
@@ -1211,23 +1222,23 @@ def test_contact_rounds_match_the_kernels_in_turn(mode, rounds):
     out = []
     for fused in (False, True):
         v = v0.copy()
-        work, geo = np.zeros(s, np.int32), np.zeros((s, 4))
+        work, geo, ends = np.zeros(s, np.int32), np.zeros((s, 4)), np.zeros((s, 2), np.int32)
         body_v = body_prev.copy()
         contact, contact_n = np.zeros(n, np.bool_), np.zeros((n, 3))
         n_act = K.modify_velocities(x, v, springs, rest, active, 0.05, mode_i, g, 1e-4, body_v, 6, work, geo,
-                                    0.002)
+                                    ends, 0.002)
         assert n_act > 0
         pv = np.zeros((m, 3))
         K.point_average(v, quads, tris, pv)
         if fused:
-            hits = K.contact_rounds(v, springs, mode_i, g, 1e-4, 6, work, geo, 0.002, n_act,
+            hits = K.contact_rounds(v, ends, mode_i, g, 1e-4, 6, work, geo, 0.002, n_act,
                                     rounds, status, normal, bvel, depth, n, quads, tris, 0.005, 0.0, 0.4,
                                     contact, contact_n, body_v, np.zeros(m, np.int32), np.zeros(n, np.int32))
         else:
             for r in range(rounds):
                 if r > 0:
                     K.modify_velocities(x, v, springs, rest, active, 0.05, mode_i, g, 1e-4, body_v, 6, work,
-                                        geo, 0.002, n_act)
+                                        geo, ends, 0.002, n_act)
                     K.point_average(v, quads, tris, pv)
                 hits = K.collision_response(v, status, normal, bvel, depth, pv, n, quads, tris, 0.005, 0.0, 0.4,
                                             1e-4, contact, contact_n, body_v)

@@ -68,8 +68,8 @@ def test_serial_kernels_compile_without_parallel_loops():
     solver.late_guard()
     K.guard_listed(state.x, state.v, m.springs, m.rest, solver.active, 0.05, m.inv_mass, 2, solver._guard_work,
                    solver.contact, solver.contact_n, 0.001, solver._listed, solver._listed_words, m.adj_ptr,
-                   m.adj_spring, solver.x_guard, solver._saved, solver._saved_list, solver.vm_work, solver.vm_geo, 0,
-                   *solver._late_limits(0.05), 0.03)
+                   m.adj_spring, solver.x_guard, solver._saved, solver._saved_list, solver.vm_work, solver.vm_geo,
+                   solver.vm_ends, 0, solver._near, 0, solver._late_limits(0.05), 0.03)
     # the response on its own (the solver's contact_rounds does the same work; tests/test_cloth.py
     # compares them), on the last step's points
     npt = len(solver.points)
@@ -136,7 +136,7 @@ def test_serial_kernel_matches_plain_njit(fn):
     if fn == "modify_velocities":
         rest = np.linalg.norm(x[springs[:, 1]] - x[springs[:, 0]], axis=1) * 0.9
         args = (springs, rest, np.ones(s, np.bool_), 0.05, K.VM_AVERAGE, np.array([0, -9.81, 0.0]), 1e-3,
-                np.zeros((n, 3)), 6, np.zeros(s, np.int32), np.zeros((s, 4)), 0.002)
+                np.zeros((n, 3)), 6, np.zeros(s, np.int32), np.zeros((s, 4)), np.zeros((s, 2), np.int32), 0.002)
         outs = []
         for f in (getattr(K, fn), njit(fastmath=True)(getattr(K, fn).py_func)):
             vv = v.copy()

@@ -80,10 +80,18 @@ def _single_spring(s, sp, xs, ys, zs, vx, vy, vz, rest, k, spring_c, fx, fy, fz)
     return length, dx, dy, dz
 
 
+@njit(fastmath=True, cache=True, inline="always")
+def _list_mark(length, limit, near_frac):
+    """The force pass's mark of a listed spring: 2 if it is past its listing length by more than
+    near_frac x that length (near the strain guard's), else 1."""
+    return np.uint8(2) if length - limit > near_frac * limit else np.uint8(1)
+
+
 @serial_kernel(error_model="numpy")
 def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprops, gravity, damping,
                               contact, contact_n, mu, dt, f_out, work, geo, soa, tmp, lengths, listed, listed_words,
-                              geo_s, r_fast, n_fast, n_run_slow, slow_due, f_slow, one, tiny, r_held):
+                              geo_s, r_fast, n_fast, n_run_slow, slow_due, f_slow, one, tiny, r_held,
+                              springs_m, ends, near, near_frac):
     """Springs (eq. 2) with damping along each spring, gravity, viscous damping, then the
     reaction force of seed 000 eq. 16 where the vertex touched the body in the previous step
     (cancel the force into the body, Coulomb friction on the tangential part), then the velocity
@@ -120,6 +128,12 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
     (measured: listed in the runs' order instead, the drapes changed enough for default:female's
     M dress at 3 cm to end 6.05 % stretched, reported tight, where it ended at 5.93 % before;
     in model order 5.94 %, in as many iterations as before).
+
+    With the list come each listed spring's ends (ends (>= S, 2) int32: springs_m, the model's
+    springs, at the listed ones; what the strain limit's passes read, _modify_passes) and the
+    listed springs near the strain guard's length (near (>= S,) int32: their places in the list;
+    their excess past the listing length more than near_frac x that length; K.guard_listed
+    measures them again). Returns (listed, near).
 
     The springs are computed in the precision of soa (with tmp, lengths, f_slow and sprops
     alike; one and tiny as 1 and 1e-30 of it): double for the drape, single for the walk
@@ -184,7 +198,7 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
                 dz = zb[t] - za[t]
                 length = np.sqrt(dx * dx + dy * dy + dz * dz)
                 if length > lim_[t]:
-                    listed[perm[s0 + t]] = 1
+                    listed[perm[s0 + t]] = _list_mark(length, lim_[t], near_frac)
                     _store_geo(geo_s, perm[s0 + t], dx, dy, dz, length, lim_[t])
                     n_act += 1
     for r in range(r_held):
@@ -210,25 +224,31 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
                 if lengths[s] > limits[s]:
                     a = sp[s, 0]
                     b = sp[s, 1]
-                    listed[perm[s]] = 1
+                    listed[perm[s]] = _list_mark(lengths[s], limits[s], near_frac)
                     _store_geo(geo_s, perm[s], xs[b] - xs[a], ys[b] - ys[a], zs[b] - zs[a], lengths[s], limits[s])
                     n_act += 1
         _scatter_run(fx, fy, fz, tx, ty, tz, a0, b0, m)
     for s in range(n_run, n_fast):
         length, dx, dy, dz = _single_spring(s, sp, xs, ys, zs, vx, vy, vz, rest, k, spring_c, fx, fy, fz)
         if length > 1e-12 and length > limits[s]:
-            listed[perm[s]] = 1
+            listed[perm[s]] = _list_mark(length, limits[s], near_frac)
             _store_geo(geo_s, perm[s], dx, dy, dz, length, limits[s])
             n_act += 1
     # the list in the model's spring order (the velocity modification's Gauss-Seidel order)
     n_list = 0
+    n_near = 0
     if n_act:
         for w in range(listed_words.shape[0]):  # eight marks at a time: most words are 0
             if listed_words[w]:
                 for s in range(8 * w, 8 * w + 8):
                     if listed[s]:
+                        if listed[s] == 2:
+                            near[n_near] = n_list
+                            n_near += 1
                         listed[s] = 0
                         work[n_list] = s
+                        ends[n_list, 0] = springs_m[s, 0]
+                        ends[n_list, 1] = springs_m[s, 1]
                         for c in range(4):
                             geo[n_list, c] = geo_s[s, c]
                         n_list += 1
@@ -252,7 +272,7 @@ def eval_forces_and_integrate(x, v, inv_mass, mass, sp, perm, runs, n_run, sprop
         v[i, 0] += w * fx_
         v[i, 1] += w * fy_
         v[i, 2] += w * fz_
-    return n_act
+    return n_act, n_near
 
 
 @serial_kernel
@@ -430,7 +450,7 @@ def _modify_one(v, a, b, geo, k, mode, gravity, dt, body_v, recover):
 
 @serial_kernel
 def modify_velocities(x, v, springs, rest, active, threshold, mode, gravity, dt, body_v, passes, work, geo,
-                      recover, n_known=-1):
+                      ends, recover, n_known=-1):
     """Velocity modification against super-elasticity, after each step. For a spring longer
     than (1 + threshold) x rest whose ends move apart, the stretching (along-spring) velocity
     components v1t, v2t are changed:
@@ -447,38 +467,30 @@ def modify_velocities(x, v, springs, rest, active, threshold, mode, gravity, dt,
     n_known >= 0: positions have not moved since the call that found n_known over-elongated
     springs in `work`, so the full sweep is skipped (later rounds of the same step).
     Returns the number of over-elongated springs.
-    geo (S, 4): the listed springs' directions and excesses (_spring_geo), written by the sweep
-    (or by eval_forces_and_integrate, whose list n_known is)."""
+    geo (S, 4): the listed springs' directions and excesses (_spring_geo), and ends (S, 2)
+    int32 their ends, written by the sweep (or by eval_forces_and_integrate, whose list n_known
+    is): the passes read the ends from this small array instead of from springs[work[k]] --
+    rows of the whole spring array, a cache line apart (measured on four captured walking steps
+    of the dress, 693-1,102 springs listed, six passes, 2,000 interleaved calls each: 0.78-0.79
+    x the time, the same velocities bit for bit)."""
     n_act = n_known
     if n_known < 0:
         n_act = 0
         for s in range(springs.shape[0]):
             if active[s] and _spring_geo(x, springs[s, 0], springs[s, 1], (1.0 + threshold) * rest[s], geo, n_act):
                 work[n_act] = s
+                ends[n_act, 0] = springs[s, 0]
+                ends[n_act, 1] = springs[s, 1]
                 _modify_one(v, springs[s, 0], springs[s, 1], geo, n_act, mode, gravity, dt, body_v, recover)
                 n_act += 1
         passes -= 1
-    _modify_passes(v, _endpoints(springs, work, n_act), geo, n_act, mode, gravity, dt, body_v, passes, recover)
+    _modify_passes(v, ends, geo, n_act, mode, gravity, dt, body_v, passes, recover)
     return n_act
 
 
 @njit(fastmath=True, cache=True, inline="always")
-def _endpoints(springs, work, n_act):
-    """The listed springs' ends, (n_act, 2): the passes read them from this small array instead
-    of from springs[work[k]] -- rows of the whole spring array, a cache line apart. Measured on
-    four captured walking steps of the dress (693-1,102 springs listed, six passes; interleaved,
-    2,000 calls each): modify_velocities 0.78-0.79 x the time, the same velocities bit for bit."""
-    ab = np.empty((n_act, 2), np.int32)
-    for k in range(n_act):
-        s = work[k]
-        ab[k, 0] = springs[s, 0]
-        ab[k, 1] = springs[s, 1]
-    return ab
-
-
-@njit(fastmath=True, cache=True, inline="always")
 def _modify_passes(v, ab, geo, n_act, mode, gravity, dt, body_v, passes, recover):
-    """Up to `passes` Gauss-Seidel passes over the n_act listed springs (ends ab, _endpoints),
+    """Up to `passes` Gauss-Seidel passes over the n_act listed springs (their ends in ab),
     until one changes nothing."""
     for _ in range(passes):
         changed = 0
@@ -680,42 +692,42 @@ def _guard_release(x, x_before, v, saved, saved_list, n_saved, n_act):
 @serial_kernel
 def guard_listed(x, v, springs, rest, active, threshold, inv_mass, passes, work, contact, contact_n, max_move,
                  flags, flag_words, adj_ptr, adj_spring, x_before, saved, saved_list,
-                 listed, listed_geo, n_listed, near_excess, lim2, listed_threshold):
+                 listed, listed_geo, listed_ends, n_listed, near, n_near, lim2, listed_threshold):
     """The strain guard of guard_positions (the same projections and inelastic guard, bit for
     bit, on the same positions) found from a list instead of a pass over every spring: the
     springs the force pass listed for the velocity modification (listed[:n_listed], their
-    excess over the listing length, (1 + listed_threshold) rest, in listed_geo[:, 3]; see
-    eval_forces_and_integrate). Those whose excess passes near_excess (per spring, by model
-    index: half the guard's, far above the error of the list's single precision lengths) are
-    measured in double and flagged past lim2 (by model index: a hair below ((1 + threshold)
-    rest)^2, as guard_positions flags). Then the listed springs at the points the guard looked
-    at are measured again (listed_geo, in double; one no longer long gets an excess of -1e30,
-    which the velocity modification leaves alone).
+    excess over the listing length, (1 + listed_threshold) rest, in listed_geo[:, 3], their
+    ends in listed_ends; see eval_forces_and_integrate). Those it found near the guard's length
+    (near[:n_near], places in the list: past the listing length by more than half the guard's
+    excess, far above the error of the list's single precision lengths) are measured in double
+    and flagged past lim2 (by model index: a hair below ((1 + threshold) rest)^2, as
+    guard_positions flags). Then the listed springs at the points the guard looked at are
+    measured again (listed_geo, in double; one no longer long gets an excess of -1e30, which
+    the velocity modification leaves alone).
     For a step that guards right after its force pass (ClothSolver.late_guard). `work` gets
     the projected springs: it must not be `listed`. Returns the number projected."""
     any_long = False
-    for k in range(n_listed):
+    for c in range(n_near):
+        k = near[c]
         s = listed[k]
-        if listed_geo[k, 3] > near_excess[s]:
-            a = springs[s, 0]
-            b = springs[s, 1]
-            dx = x[b, 0] - x[a, 0]
-            dy = x[b, 1] - x[a, 1]
-            dz = x[b, 2] - x[a, 2]
-            if dx * dx + dy * dy + dz * dz > lim2[s]:
-                flags[s] = 1
-                any_long = True
+        a = listed_ends[k, 0]
+        b = listed_ends[k, 1]
+        dx = x[b, 0] - x[a, 0]
+        dy = x[b, 1] - x[a, 1]
+        dz = x[b, 2] - x[a, 2]
+        if dx * dx + dy * dy + dz * dz > lim2[s]:
+            flags[s] = 1
+            any_long = True
     if not any_long:
         return 0
     n_act, n_saved = _guard_sweep(x, springs, rest, active, threshold, inv_mass, passes, work, contact, contact_n,
                                   max_move, flags, flag_words, adj_ptr, adj_spring, x_before, saved, saved_list)
     if n_act:
         for k in range(n_listed):
-            s = listed[k]
-            a = springs[s, 0]
-            b = springs[s, 1]
+            a = listed_ends[k, 0]
+            b = listed_ends[k, 1]
             if saved[a] or saved[b]:
-                if not _spring_geo(x, a, b, (1.0 + listed_threshold) * rest[s], listed_geo, k):
+                if not _spring_geo(x, a, b, (1.0 + listed_threshold) * rest[listed[k]], listed_geo, k):
                     listed_geo[k, 3] = -1e30
     _guard_release(x, x_before, v, saved, saved_list, n_saved, n_act)
     return n_act
@@ -901,12 +913,13 @@ def collision_response(v, status, normal, body_v, depth, pv, n_vertices, quads, 
 
 
 @serial_kernel
-def contact_rounds(v, springs, mode, gravity, dt, passes, work, geo, recover, n_act,
+def contact_rounds(v, ends, mode, gravity, dt, passes, work, geo, recover, n_act,
                    rounds, status, normal, body_v, depth, n_vertices, quads, tris, tol, refl, mu,
                    contact, contact_n, vbody_out, hit_buf, touched_buf):
     """The collision response of a step alternated with the strain limit on the same contacts,
     in one call: `rounds` times (1) from the second round on, the velocity modification over the
-    n_act springs known to be over-elongated (modify_velocities with n_known), (2) the response
+    n_act springs known to be over-elongated (modify_velocities with n_known; their ends in
+    `ends`, work and geo as it left them), (2) the response
     of every point in contact (collision_response, each point's velocity averaged from its
     corners as point_average does). The same arithmetic as calling those kernels in turn, but
     only the points in contact and the vertices they touch are visited in each round (those
@@ -939,10 +952,9 @@ def contact_rounds(v, springs, mode, gravity, dt, passes, work, geo, recover, n_
             _report_contact(i, p, normal, body_v, contact_n, vbody_out)
     acc = np.empty((n, 3))
     cnt = np.empty(n, dtype=np.int32)
-    ab = _endpoints(springs, work, n_act if rounds > 1 else 0)
     for rnd in range(rounds):
         if rnd > 0:
-            _modify_passes(v, ab, geo, n_act, mode, gravity, dt, vbody_out, passes, recover)
+            _modify_passes(v, ends, geo, n_act, mode, gravity, dt, vbody_out, passes, recover)
         for k in range(n_touch):
             i = touched_buf[k]
             acc[i, 0] = 0.0

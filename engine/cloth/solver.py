@@ -100,6 +100,9 @@ class ClothSolver:
         self._geo_s = np.zeros((len(model.springs), 4))
         self.vm_work = np.zeros(len(model.springs), dtype=np.int32)
         self.vm_geo = np.zeros((len(model.springs), 4))  # the listed springs' direction, excess
+        self.vm_ends = np.zeros((len(model.springs), 2), dtype=np.int32)  # ... and ends
+        self._near = np.zeros(len(model.springs), dtype=np.int32)  # ... those near the guard's length (late_guard)
+        self._n_near = 0
         self.contact = np.zeros(n, dtype=np.bool_)
         self.contact_n = np.zeros((n, 3))
         self.body_v = np.zeros((n, 3))
@@ -201,17 +204,23 @@ class ClothSolver:
                                          self._listed, self._listed_words, m.adj_ptr, m.adj_spring,
                                          self.x_guard, self._saved, self._saved_list)
 
-    def _late_limits(self, threshold: float) -> tuple[np.ndarray, np.ndarray]:
-        """late_guard's near_excess and lim2 (K.guard_listed; by model index): half the excess
-        over the listing length at which a spring passes the guard's threshold, and a hair
-        below that length squared (inf for the springs the strain limit leaves alone)."""
+    def _late_limits(self, threshold: float) -> np.ndarray:
+        """late_guard's lim2 (K.guard_listed; by model index): a hair below the squared length
+        at which a spring passes the guard's threshold (inf for the springs the strain limit
+        leaves alone)."""
         if self._late[0] != threshold:
             m = self.model
-            near = 0.5 * (threshold - m.fabric.strain_threshold) * m.rest
             lim = (1.0 + threshold) * m.rest
-            lim2 = np.where(self.active, lim * lim * (1.0 - 1e-9), np.inf)
-            self._late = (threshold, (np.ascontiguousarray(near), np.ascontiguousarray(lim2)))
+            self._late = (threshold, np.ascontiguousarray(np.where(self.active, lim * lim * (1.0 - 1e-9), np.inf)))
         return self._late[1]
+
+    def _near_frac(self) -> float:
+        """The force pass's near_frac: with late_guard, half the strain guard's excess as a
+        fraction of the listing length ((1 + threshold) rest); else none is near (1e30)."""
+        if self._late is None or self.strain_guard is None:
+            return 1e30
+        thr = self.model.fabric.strain_threshold
+        return 0.5 * self.strain_guard / (1.0 + thr)
 
     def _spring_props(self, model: ClothModel) -> np.ndarray:
         """(4, S) rest, stiffness, damping, strain limit (inf: not limited) in the force pass's order."""
@@ -250,9 +259,10 @@ class ClothSolver:
 
     def _forces(self, state: ClothState, g: np.ndarray, damping_scale: float, friction_scale: float) -> int:
         """The force pass (K.eval_forces_and_integrate) on state: v += dt f / m; lists the
-        springs past the strain limit (vm_work, vm_geo) and returns their count."""
+        springs past the strain limit (vm_work, vm_geo, vm_ends; with late_guard those near the
+        guard's length in _near, _n_near) and returns their count."""
         m, p, dt, r = self.model, self.model.params, self.dt, self.runs
-        n_over = K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, r.springs, r.perm, r.runs, r.n_run,
+        n_over, self._n_near = K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, r.springs, r.perm, r.runs, r.n_run,
                                              self._sprops, g, p.damping * damping_scale,
                                              self.contact, self.contact_n, m.fabric.friction * friction_scale, dt,
                                              self.f, self.vm_work, self.vm_geo,
@@ -260,7 +270,8 @@ class ClothSolver:
                                              self._listed_words, self._geo_s, r.r_fast, r.n_fast, r.n_run_slow,
                                              self.iterations % p.flexion_every == 0 or not self._slow_held,
                                              self._f_slow,
-                                             self._one, self._tiny, r.r_held)
+                                             self._one, self._tiny, r.r_held,
+                                             m.springs, self.vm_ends, self._near, self._near_frac())
         self._slow_held = True
         return n_over
 
@@ -279,13 +290,13 @@ class ClothSolver:
                                           p.vm_passes, self._guard_work, self.contact, self.contact_n, p.guard_step,
                                           self._listed, self._listed_words, m.adj_ptr, m.adj_spring,
                                           self.x_guard, self._saved, self._saved_list,
-                                          self.vm_work, self.vm_geo, n_over, *self._late_limits(thr),
-                                          m.fabric.strain_threshold)
+                                          self.vm_work, self.vm_geo, self.vm_ends, n_over, self._near, self._n_near,
+                                          self._late_limits(thr), m.fabric.strain_threshold)
             self.guard_pending = False
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 §3)
         n_act = K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
                                     self.mode, g, dt, self.body_v, p.vm_passes,
-                                    self.vm_work, self.vm_geo, recover, n_over)
+                                    self.vm_work, self.vm_geo, self.vm_ends, recover, n_over)
         if self.sewing is not None:
             # sewing has priority over the strain limit (it stretches cloth near a seam by
             # design; the drape's strain recovery relaxes that), but not over the collision below
@@ -304,7 +315,7 @@ class ClothSolver:
             # is pushed outward while it may not stretch): alternate the two velocity changes a
             # few rounds on the same contacts -- this converges to "stop sliding" -- and end on the
             # collision response so nothing moves into the body.
-            self.last_hits = K.contact_rounds(state.v, m.springs, self.mode, g, dt,
+            self.last_hits = K.contact_rounds(state.v, self.vm_ends, self.mode, g, dt,
                                               p.vm_passes, self.vm_work, self.vm_geo, recover, n_act,
                                               p.contact_rounds, status, normal, bvel, depth, m.n, m.quads, m.tris,
                                               p.tolerance, p.reflection, m.fabric.friction * friction_scale,
