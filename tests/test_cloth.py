@@ -1038,6 +1038,18 @@ def test_strain_guard_never_pulls_a_contact_into_the_body():
     assert x[0, 1] < 0.0
 
 
+def _stretched(garment, scale, noise):
+    """A cloth stretched unevenly (positions scaled by `scale`, then moved by `noise` m at
+    random), moving at random, a fifth of its points touching a body below it (normal +y)."""
+    rng = np.random.default_rng(7)
+    x0 = garment.positions * np.array(scale) + rng.normal(0.0, noise, garment.positions.shape)
+    v0 = rng.normal(0.0, 0.3, x0.shape)
+    contact = rng.random(len(x0)) < 0.2
+    normal = np.zeros((len(x0), 3))
+    normal[:, 1] = 1.0
+    return x0, v0, contact, normal
+
+
 def test_guard_positions_is_the_plain_guard_bit_for_bit(garment):
     """K.guard_positions (a vector pass over the force pass's runs, then only the flagged
     springs and the springs next to what moved) gives exactly what provot_positions with
@@ -1046,12 +1058,7 @@ def test_guard_positions_is_the_plain_guard_bit_for_bit(garment):
     projections make their neighbours long), some points touching a body -- and leaves its flag
     and point buffers clear for the next step."""
     m = _model(garment)
-    rng = np.random.default_rng(7)
-    x0 = garment.positions * np.array([1.09, 1.0, 1.02]) + rng.normal(0.0, 0.0008, garment.positions.shape)
-    v0 = rng.normal(0.0, 0.3, x0.shape)
-    contact = rng.random(m.n) < 0.2
-    normal = np.zeros((m.n, 3))
-    normal[:, 1] = 1.0
+    x0, v0, contact, normal = _stretched(garment, [1.09, 1.0, 1.02], 0.0008)
     thr = m.fabric.strain_threshold + 0.02
     x1, v1, w1 = x0.copy(), v0.copy(), np.zeros(len(m.springs), np.int32)
     active = m.kind != FLEXION
@@ -1088,12 +1095,7 @@ def test_the_late_guard_finds_and_makes_what_guard_positions_does(garment):
     whose end the guard looked at and did not move); the flag and point buffers are clear
     afterwards."""
     m = _model(garment)
-    rng = np.random.default_rng(7)
-    x0 = garment.positions * np.array([1.05, 1.0, 1.0]) + rng.normal(0.0, 0.0005, garment.positions.shape)
-    v0 = rng.normal(0.0, 0.3, x0.shape)
-    contact = rng.random(m.n) < 0.2
-    normal = np.zeros((m.n, 3))
-    normal[:, 1] = 1.0
+    x0, v0, contact, normal = _stretched(garment, [1.05, 1.0, 1.0], 0.0005)
     solver = ClothSolver(replace(m, params=replace(m.params, strain_guard=0.02)))
     solver.single_precision_forces()
     solver.hold_shear()
