@@ -1183,6 +1183,25 @@ def test_a_late_guarded_step_guards_what_it_integrated(garment):
     np.testing.assert_array_equal(state.x, x_after)
 
 
+def test_dropped_forces_change_nothing_else(garment):
+    """ClothSolver.drop_forces (the walk's): the force pass no longer writes solver.f; the
+    steps' positions and velocities are the same bit for bit."""
+    m = _model(garment)
+    x0, v0, _, _ = _stretched(garment, [1.05, 1.0, 1.0], 0.0005)
+    out = []
+    for drop in (False, True):
+        solver = ClothSolver(m)
+        if drop:
+            solver.drop_forces()
+        state = ClothState(x0.copy(), v0.copy())
+        for _ in range(5):
+            solver.step(state)
+        out.append((state.x, state.v, solver.f))
+    np.testing.assert_array_equal(out[1][0], out[0][0])
+    np.testing.assert_array_equal(out[1][1], out[0][1])
+    assert np.abs(out[0][2]).max() > 0 and not out[1][2].any()
+
+
 def test_strain_guard_shortens_a_spring_a_little_at_a_time():
     """The guard moves positions by at most max_move a spring a pass, so a spring stretched 3 mm
     past its limit (cloth torn over a body part) is brought back over several steps, not in one

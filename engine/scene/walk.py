@@ -318,6 +318,7 @@ def walk_cloth(body: Body, drape: DrapeResult, options: WalkOptions, *, texel: f
         solver.hold_shear()
     if o.late_guard:
         solver.late_guard()
+    solver.drop_forces()  # (only FIRE and diagnostics read them)
     state = ClothState(drape.state.x.copy(), drape.state.v.copy())
     frames = np.empty((n_frames + 1, model.n, 3), np.float32)
     frames[0] = state.x
