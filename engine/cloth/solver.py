@@ -123,7 +123,7 @@ class ClothSolver:
         self._saved = np.zeros(n, dtype=np.uint8)  # ... which points those are
         self._saved_list = np.zeros(n, dtype=np.int32)
         self._guard_lim2 = (None, None)  # (threshold, squared lengths the guard looks past, run order)
-        self._late = None  # late_guard: (threshold, the excess past which a listed spring is flagged)
+        self._late = None  # late_guard: (threshold, the squared lengths past which a listed spring is flagged)
         self._guard_work = None  # ... and the springs it projects
         self.guard_pending = False  # late_guard: positions integrated and not yet guarded
         self.recover = p.recover  # ... and the strain recovery (it would fight the seam pull)
@@ -215,6 +215,19 @@ class ClothSolver:
                                          self._listed, self._listed_words, m.adj_ptr, m.adj_spring,
                                          self.x_guard, self._saved, self._saved_list)
 
+    def _guard_listed(self, state: ClothState, n_over: int) -> None:
+        """late_guard's strain guard of state's positions (K.guard_listed), from the force pass's
+        list of its n_over long springs."""
+        m, p = self.model, self.model.params
+        thr = m.fabric.strain_threshold + self.strain_guard
+        self.guarded = K.guard_listed(state.x, state.v, m.springs, m.rest, self.active, thr, m.inv_mass,
+                                      p.vm_passes, self._guard_work, self.contact, self.contact_n, p.guard_step,
+                                      self._listed, self._listed_words, m.adj_ptr, m.adj_spring,
+                                      self.x_guard, self._saved, self._saved_list,
+                                      self.vm_work, self.vm_geo, self.vm_ends, n_over, self._near, self._n_near,
+                                      self._late_limits(thr), m.fabric.strain_threshold)
+        self.guard_pending = False
+
     def _late_limits(self, threshold: float) -> np.ndarray:
         """late_guard's lim2 (K.guard_listed; by model index): a hair below the squared length
         at which a spring passes the guard's threshold (inf for the springs the strain limit
@@ -273,16 +286,13 @@ class ClothSolver:
         springs past the strain limit (vm_work, vm_geo, vm_ends; with late_guard those near the
         guard's length in _near, _n_near) and returns their count."""
         m, p, dt, r = self.model, self.model.params, self.dt, self.runs
-        n_over, self._n_near = K.eval_forces_and_integrate(state.x, state.v, m.inv_mass, m.mass, r.springs, r.perm, r.runs, r.n_run,
-                                             self._sprops, g, p.damping * damping_scale,
-                                             self.contact, self.contact_n, m.fabric.friction * friction_scale, dt,
-                                             self._f_kept, self.vm_work, self.vm_geo,
-                                             self._fsoa, self._run_tmp, self._lengths, self._listed,
-                                             self._listed_words, self._geo_s, r.r_fast, r.n_fast, r.n_run_slow,
-                                             self.iterations % p.flexion_every == 0 or not self._slow_held,
-                                             self._f_slow,
-                                             self._one, self._tiny, r.r_held,
-                                             m.springs, self.vm_ends, self._near, self._near_frac())
+        n_over, self._n_near = K.eval_forces_and_integrate(
+            state.x, state.v, m.inv_mass, m.mass, r.springs, r.perm, r.runs, r.n_run, self._sprops, g,
+            p.damping * damping_scale, self.contact, self.contact_n, m.fabric.friction * friction_scale, dt,
+            self._f_kept, self.vm_work, self.vm_geo, self._fsoa, self._run_tmp, self._lengths, self._listed,
+            self._listed_words, self._geo_s, r.r_fast, r.n_fast, r.n_run_slow,
+            self.iterations % p.flexion_every == 0 or not self._slow_held, self._f_slow, self._one, self._tiny,
+            r.r_held, m.springs, self.vm_ends, self._near, self._near_frac())
         self._slow_held = True
         return n_over
 
@@ -296,14 +306,7 @@ class ClothSolver:
         # lists the over-elongated springs for the velocity modification
         n_over = self._forces(state, g, damping_scale, friction_scale)
         if self.guard_pending:  # late_guard: the last step's positions, guarded from the force pass's list
-            thr = m.fabric.strain_threshold + self.strain_guard
-            self.guarded = K.guard_listed(state.x, state.v, m.springs, m.rest, self.active, thr, m.inv_mass,
-                                          p.vm_passes, self._guard_work, self.contact, self.contact_n, p.guard_step,
-                                          self._listed, self._listed_words, m.adj_ptr, m.adj_spring,
-                                          self.x_guard, self._saved, self._saved_list,
-                                          self.vm_work, self.vm_geo, self.vm_ends, n_over, self._near, self._n_near,
-                                          self._late_limits(thr), m.fabric.strain_threshold)
-            self.guard_pending = False
+            self._guard_listed(state, n_over)
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 §3)
         n_act = K.modify_velocities(state.x, state.v, m.springs, m.rest, self.active, m.fabric.strain_threshold,
                                     self.mode, g, dt, self.body_v, p.vm_passes,
