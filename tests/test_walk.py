@@ -747,6 +747,61 @@ def test_queries_shared_with_the_server_answer_as_one_thread_does():
             r.release()
 
 
+def test_a_collider_that_fills_faces_answers_as_for_points_made_whole():
+    """With fill_faces the solver writes only the vertex rows of the points it asks for; the
+    collider's query chunks (either thread's) make the face rows -- the same rows, bit for bit,
+    as K.collision_points makes -- and answer them as they answer points made whole, queried and
+    prefetched over a few steps round a moving box."""
+    import engine.cloth.kernels as K
+    import engine.collide.moving as mv
+    from engine.collide.maps import MapRenderer
+    from engine.collide.moving import TrackCollider
+
+    track = _sliding_box_track(1.0)
+    rng = np.random.default_rng(5)
+    side = 40  # a 40 x 40 grid of vertices over the box's front face: quads, and a row of triangles
+    u, w = np.meshgrid(np.linspace(-0.25, 0.25, side), np.linspace(0.05, 0.45, side))
+    x0 = np.stack([u.ravel(), w.ravel(), np.full(side * side, 0.401)], axis=1)
+    ids = np.arange(side * side).reshape(side, side)
+    quads = np.stack([ids[:-2, :-1].ravel(), ids[:-2, 1:].ravel(), ids[1:-1, 1:].ravel(), ids[1:-1, :-1].ravel()],
+                     axis=1).astype(np.int32)
+    tris = np.stack([ids[-2, :-1], ids[-2, 1:], ids[-1, 1:]], axis=1).astype(np.int32)
+    n = len(x0)
+    m = n + len(quads) + len(tris)
+    assert m > 3 * mv.CHUNK
+    rens = [MapRenderer(track.body.faces, texel=0.005, tol=0.005, window=(0.0, 0.5), with_velocity=True)
+            for _ in range(2)]
+    filled, whole = (TrackCollider(track, r, tol=0.005) for r in rens)
+    filled.fill_faces(n, quads, tris)
+    pf, pw, qf, qw = (np.zeros((m, 3)) for _ in range(4))
+    try:
+        for step in range(12):
+            t = 0.2 + step * 0.002
+            x = x0 + (0.0, 0.0, t - 0.2) + rng.normal(0.0, 0.004, x0.shape)
+            v = rng.normal(0.0, 0.05, x0.shape)
+            K.collision_points(x, v, 0.001, quads[:0], tris[:0], pf)  # the vertex rows only
+            K.collision_points(x, v, 0.001, quads, tris, pw)
+            assert not np.array_equal(pf, pw)
+            answers = []
+            for c, pts in ((filled, pf), (whole, pw)):
+                c.set_time(t)
+                answers.append([a.copy() for a in c.query(pts)] + [c.last_asked])
+            assert np.array_equal(pf, pw)  # the face rows made by the query
+            for g, want in zip(*answers):
+                assert np.array_equal(g, want)
+            if step % 2 == 0:  # (into arrays of their own, as the solver's: read while it steps on)
+                K.collision_points(x, v, 0.004, quads[:0], tris[:0], qf)
+                K.collision_points(x, v, 0.004, quads, tris, qw)
+                for c, pts in ((filled, qf), (whole, qw)):
+                    assert c.prefetch(pts, 0.002)
+        assert np.any(answers[0][0] == 2) and np.any(answers[0][0] == 0)
+    finally:
+        for c in (filled, whole):
+            c.release()
+        for r in rens:
+            r.release()
+
+
 def test_stall_watch_lets_a_helper_go_when_the_solver_gets_too_little_of_a_core():
     """A solver's thread that gets less than CPU_SHARE of a core (here: it sleeps between
     requests, as a thread crowded off the cores waits) for CPU_WINDOWS windows lets its helper

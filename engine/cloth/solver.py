@@ -113,6 +113,12 @@ class ClothSolver:
         self.hit_buf = np.zeros(m, dtype=np.int32)  # work buffers of K.contact_rounds
         self.touched_buf = np.zeros(n, dtype=np.int32)
         self.ask_rows = np.zeros(m, dtype=np.int64)  # points to ask the collider alone (_contacts)
+        # the faces whose points this solver writes into points (K.collision_points): none when
+        # the collider makes them itself (a collider with fill_faces)
+        self._faces = (model.quads, model.tris)
+        if collider is not None and hasattr(collider, "fill_faces"):
+            collider.fill_faces(n, model.quads, model.tris)
+            self._faces = (model.quads[:0], model.tris[:0])
         self._no_rows = np.zeros(0, dtype=np.int64)
         self.timing = {"cloth": 0.0, "collision": 0.0}
         self.iterations = 0
@@ -323,7 +329,7 @@ class ClothSolver:
         # hold_contacts keeps the strain limit and the seams from moving them in
         ahead = self._check_now(self.collide_every) if self.collider is not None else 0
         if ahead:
-            K.collision_points(state.x, state.v, dt * ahead, m.quads, m.tris, self.points)
+            K.collision_points(state.x, state.v, dt * ahead, *self._faces, self.points)
             status, normal, bvel, depth = self._contacts()
             # The body's push and the strain limit can disagree (a waistband sliding down the hips
             # is pushed outward while it may not stretch): alternate the two velocity changes a
@@ -367,9 +373,7 @@ class ClothSolver:
         if nxt is None:
             return
         c, ahead = nxt
-        m = self.model
-        K.collision_points(state.x, state.v, self.dt * (c - self.iterations + ahead), m.quads, m.tris,
-                           self.pre_points)
+        K.collision_points(state.x, state.v, self.dt * (c - self.iterations + ahead), *self._faces, self.pre_points)
         self.collider.prefetch(self.pre_points, (c - self.iterations + 1) * self.dt)
 
     def _next_check(self, every: float) -> tuple[int, int] | None:
