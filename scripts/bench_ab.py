@@ -10,8 +10,9 @@ checkouts computed the same drape bit for bit).
 
 With --walk SECONDS the garment is dressed (not timed) and then walks on the body (the
 procedural walk's defaults: 1.2 m/s, 30 fps, one cycle of maps reused): realtime factor, ms
-per frame (maps, cloth, collision), penetration and strain max, and a hash of all the
-garment's frames. The ratio printed last is the median of each round's this / other (a drift
+per frame (maps, cloth, collision), penetration and strain max, the query server's share of
+the collision queries' chunks (and when the walk let its helper thread go, if it did), and a
+hash of all the garment's frames. The ratio printed last is the median of each round's this / other (a drift
 between rounds cancels).
 
 With --settle SEEDS the count is what is compared, not the speed: how many iterations the
@@ -77,6 +78,7 @@ r = w.report
 print(json.dumps({"realtime": r["realtime_factor"], **{k: r["ms_per_frame"][k] for k in ("maps", "cloth", "collision", "total")},
                   "vertices": res.model.n, "pen": r["penetration_mm"]["max"],
                   "strain": max(f["strain_max"] for f in r["per_frame"]),
+                  "server": r.get("query_server_share"), "let_go": r.get("query_helper_let_go_at"),
                   "hash": hashlib.md5(w.garment_frames.tobytes()).hexdigest()[:8]}))
 """
 
@@ -189,6 +191,8 @@ def walk_ab(roots: dict[str, Path], args) -> None:
         ("ms/frame", lambda r: f"{r['total']:.1f}"), ("maps", lambda r: f"{r['maps']:.1f}"),
         ("cloth", lambda r: f"{r['cloth']:.1f}"), ("collision", lambda r: f"{r['collision']:.1f}"),
         ("pen max mm", lambda r: f"{r['pen']:.2f}"), ("strain %", lambda r: f"{100 * r['strain']:.1f}"),
+        ("server share", lambda r: "-" if r.get("server") is None else f"{r['server']:.2f}"),
+        ("helper let go at s", lambda r: "-" if r.get("let_go") is None else f"{r['let_go']:.2f}"),
         ("hash", lambda r: r["hash"])])
     for name, rs in rows.items():
         med = {k: statistics.median(x[k] for x in rs) for k in ("realtime", "total", "cloth", "collision")}
