@@ -1254,7 +1254,7 @@ def test_contact_rounds_match_the_kernels_in_turn(mode, rounds):
         if fused:
             hits = K.contact_rounds(v, ends, mode_i, g, 1e-4, 6, work, geo, 0.002, n_act,
                                     rounds, status, normal, bvel, depth, n, quads, tris, 0.005, 0.0, 0.4,
-                                    contact, contact_n, body_v, np.zeros(m, np.int32), np.zeros(n, np.int32))
+                                    contact, contact_n, body_v, np.zeros(m, np.int32), np.zeros(n, np.int32), 50.0)
         else:
             for r in range(rounds):
                 if r > 0:
@@ -1262,7 +1262,7 @@ def test_contact_rounds_match_the_kernels_in_turn(mode, rounds):
                                         geo, ends, 0.002, n_act)
                     K.point_average(v, quads, tris, pv)
                 hits = K.collision_response(v, status, normal, bvel, depth, pv, n, quads, tris, 0.005, 0.0, 0.4,
-                                            1e-4, contact, contact_n, body_v)
+                                            1e-4, contact, contact_n, body_v, 50.0)
         out.append((hits, v, contact, contact_n[contact], body_v))
     assert out[0][0] == out[1][0] == int((status != 0).sum())
     np.testing.assert_allclose(out[1][1], out[0][1], rtol=0, atol=1e-12)
@@ -1332,3 +1332,20 @@ def test_drape_progress_follows_the_drift_down_to_rest():
     f = [_settle_fraction(d, 0.005) for d in drifts]
     assert f[0] == 0.0 and f[1] == 0.0 and f[-1] == 1.0 and f[-2] == 1.0
     assert all(a <= b for a, b in zip(f, f[1:])) and 0.0 < f[3] < 1.0
+
+
+@pytest.mark.parametrize("push_time", [0.02, 0.005])
+def test_a_point_deep_in_the_band_moves_out_over_the_push_time(push_time):
+    """A resting point in the inner half of the collision band gets an outward velocity of its
+    depth past the band's middle over ClothParams.push_time (the walk's is shorter than the
+    drape's: engine.scene.walk.WalkOptions.push_time), at most MAX_PUSH; one in the outer half
+    none."""
+    tol = 0.005
+    for depth, want in ((0.004, (0.004 - 0.5 * tol) / push_time), (0.002, 0.0), (0.5, K.MAX_PUSH)):
+        v = np.zeros((1, 3))
+        contact, contact_n, vb = np.zeros(1, np.bool_), np.zeros((1, 3)), np.zeros((1, 3))
+        hits = K.collision_response(v, np.array([1], np.int8), np.array([[0.0, 1.0, 0.0]]), np.zeros((1, 3)),
+                                    np.array([depth]), v.copy(), 1, np.zeros((0, 4), np.int32), np.zeros((0, 3), np.int32),
+                                    tol, 0.0, 0.4, 1e-4, contact, contact_n, vb, 1.0 / push_time)
+        assert hits == 1 and contact[0]
+        np.testing.assert_allclose(v[0], [0.0, want, 0.0], rtol=1e-12, atol=1e-15)

@@ -75,7 +75,7 @@ def test_serial_kernels_compile_without_parallel_loops():
     npt = len(solver.points)
     K.collision_response(state.v, np.zeros(npt, np.int8), np.zeros((npt, 3)), np.zeros((npt, 3)), np.zeros(npt),
                          np.zeros((npt, 3)), m.n, m.quads, m.tris, 0.005, 0.0, 0.4, 1e-4, solver.contact,
-                         solver.contact_n, solver.body_v)
+                         solver.contact_n, solver.body_v, 50.0)
     # the map query, on empty input with the map arrays' types
     Q.query_batch_serial(np.zeros((0, 3)), 0.005, np.zeros((2, 4, 4), np.float32), np.zeros((1, 1, 4), np.float32),
                          False, np.zeros((2, 4), np.int8), np.zeros((2, 4), np.int32), np.zeros((1, 3)),
@@ -154,7 +154,7 @@ def test_serial_kernel_matches_plain_njit(fn):
         for f in (K.collision_response, njit(fastmath=True)(K.collision_response.py_func)):
             vv, c, cn, vb = v.copy(), np.zeros(n, np.bool_), np.zeros((n, 3)), np.zeros((n, 3))
             hits = f(vv, status, nrm, np.zeros((m, 3)), np.full(m, 0.003), pv, n,
-                     quads, tris, 0.005, 0.0, 0.4, 1e-3, c, cn, vb)
+                     quads, tris, 0.005, 0.0, 0.4, 1e-3, c, cn, vb, 50.0)
             outs.append((hits, vv, c))
         assert outs[0][0] == outs[1][0] and np.allclose(outs[0][1], outs[1][1]) and np.array_equal(outs[0][2], outs[1][2])
         assert outs[0][0] > 0

@@ -16,7 +16,6 @@ from engine.jit import serial_kernel
 
 VM_ZERO, VM_AVERAGE, VM_DIRECTIONAL, VM_PROVOT = 0, 1, 2, 3
 MAX_PUSH = 1.0  # m/s: fastest a collision response moves a point out of the body
-PUSH_TIME = 0.02  # s: a point too deep in the band is moved out over about this long
 # Where the directional rule applies. With v_object ~ 0 (a free spring, or cloth on a body at rest)
 # v_dir is g dt, and letting the upper end of every hanging spring copy its lower end's velocity
 # hands the cloth's weight down the chain to wherever it is held, whose spring then stretches
@@ -845,7 +844,7 @@ def collision_points(x, v, dt, quads, tris, p_out):
 
 
 @njit(fastmath=True, cache=True, inline="always")
-def _respond(vx, vy, vz, nx, ny, nz, bx, by, bz, depth, tol, refl, mu, dt):
+def _respond(vx, vy, vz, nx, ny, nz, bx, by, bz, depth, tol, refl, mu, dt, push_rate):
     """Eq. 12 / eq. 15 for one point: relative velocity to the body, reflected normal part
     (C_refl), Coulomb friction on the tangential part (C_fric = max(0, 1 - mu |dv_n| / |v_t|)),
     and a push that takes a point in the inner half of the band (or inside) back out."""
@@ -856,9 +855,9 @@ def _respond(vx, vy, vz, nx, ny, nz, bx, by, bz, depth, tol, refl, mu, dt):
     if vn < 0.0:
         new_vn = -refl * vn
     # depth: metres past the band's outer edge. Points in the inner half of the band drift back
-    # out over PUSH_TIME (a resting contact must not be kicked: at dt ~ 0.2 ms a one-step push
-    # would be metres per second of jitter)
-    push = (depth - 0.5 * tol) / PUSH_TIME
+    # out over 1 / push_rate seconds (ClothParams.push_time: a resting contact must not be
+    # kicked: at dt ~ 0.2 ms a one-step push would be metres per second of jitter)
+    push = (depth - 0.5 * tol) * push_rate
     if push > MAX_PUSH:  # a point deep inside (e.g. pulled through by a seam) leaves gently
         push = MAX_PUSH
     if push > new_vn:
@@ -875,10 +874,11 @@ def _respond(vx, vy, vz, nx, ny, nz, bx, by, bz, depth, tol, refl, mu, dt):
 
 @serial_kernel
 def collision_response(v, status, normal, body_v, depth, pv, n_vertices, quads, tris,
-                       tol, refl, mu, dt, contact, contact_n, vbody_out):
+                       tol, refl, mu, dt, contact, contact_n, vbody_out, push_rate):
     """Apply the responses of vertex and face checks: a face's resulting velocity goes to all its
     corners; a vertex with several responses gets their average (seed 003 §6). Marks contacts
-    (used by next step's reaction force) and records the body velocity seen by each vertex."""
+    (used by next step's reaction force) and records the body velocity seen by each vertex.
+    push_rate: 1 / ClothParams.push_time (_respond)."""
     n = n_vertices
     acc = np.empty((n, 3))  # (no np.zeros in a serial_kernel: see engine/jit.py)
     cnt = np.empty(n, dtype=np.int32)
@@ -898,7 +898,7 @@ def collision_response(v, status, normal, body_v, depth, pv, n_vertices, quads, 
             continue
         hits += 1
         rx, ry, rz = _respond(pv[p, 0], pv[p, 1], pv[p, 2], normal[p, 0], normal[p, 1], normal[p, 2],
-                              body_v[p, 0], body_v[p, 1], body_v[p, 2], depth[p], tol, refl, mu, dt)
+                              body_v[p, 0], body_v[p, 1], body_v[p, 2], depth[p], tol, refl, mu, dt, push_rate)
         for r in range(_n_corners(p, n, quads.shape[0])):
             i = _corner(p, r, n, quads.shape[0], quads, tris)
             acc[i, 0] += rx
@@ -918,7 +918,7 @@ def collision_response(v, status, normal, body_v, depth, pv, n_vertices, quads, 
 @serial_kernel
 def contact_rounds(v, ends, mode, gravity, dt, passes, work, geo, recover, n_act,
                    rounds, status, normal, body_v, depth, n_vertices, quads, tris, tol, refl, mu,
-                   contact, contact_n, vbody_out, hit_buf, touched_buf):
+                   contact, contact_n, vbody_out, hit_buf, touched_buf, push_rate):
     """The collision response of a step alternated with the strain limit on the same contacts,
     in one call: `rounds` times (1) from the second round on, the velocity modification over the
     n_act springs known to be over-elongated (modify_velocities with n_known; their ends in
@@ -927,7 +927,8 @@ def contact_rounds(v, ends, mode, gravity, dt, passes, work, geo, recover, n_act
     corners as point_average does). The same arithmetic as calling those kernels in turn, but
     only the points in contact and the vertices they touch are visited in each round (those
     kernels sweep all vertices and points every round). hit_buf (N + Q + T,) and touched_buf
-    (N,) int32 are work buffers. Returns the number of points in contact."""
+    (N,) int32 are work buffers; push_rate is 1 / ClothParams.push_time. Returns the number of
+    points in contact."""
     n = n_vertices
     nq = quads.shape[0]
     m = status.shape[0]
@@ -968,7 +969,8 @@ def contact_rounds(v, ends, mode, gravity, dt, passes, work, geo, recover, n_act
             p = hit_buf[h]
             pvx, pvy, pvz = _point_mean(v, p, n, nq, quads, tris)
             rx, ry, rz = _respond(pvx, pvy, pvz, normal[p, 0], normal[p, 1], normal[p, 2],
-                                  body_v[p, 0], body_v[p, 1], body_v[p, 2], depth[p], tol, refl, mu, dt)
+                                  body_v[p, 0], body_v[p, 1], body_v[p, 2], depth[p], tol, refl, mu, dt,
+                                  push_rate)
             for r in range(_n_corners(p, n, nq)):
                 i = _corner(p, r, n, nq, quads, tris)
                 acc[i, 0] += rx

@@ -83,6 +83,9 @@ class ClothParams:
     # (engine.scene.drape.DrapeOptions.collide_every: sewing every 3 at 1.5 cm, draping every 2);
     # walking as often as the body's travel asks (engine.scene.walk.WalkOptions)
     recover: float = 0.002  # s: a spring's excess over the strain limit is worked off over this long
+    push_time: float = 0.02  # s: a checked point in the inner half of the collision band (or inside)
+    # is moved out over about this long (engine.cloth.kernels._respond; the walk sets its own:
+    # engine.scene.walk.WalkOptions.push_time)
     flexion_every: int = 4  # steps between evaluations of the flexion springs' forces, held in
     # between (engine.cloth.kernels.eval_forces_and_integrate). They are ~7,500 x softer than the
     # stretch springs (cotton at 1.5 cm: 0.044 against 327 N/m), so their force changes little in

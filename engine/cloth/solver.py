@@ -340,7 +340,7 @@ class ClothSolver:
                                               p.contact_rounds, status, normal, bvel, depth, m.n, m.quads, m.tris,
                                               p.tolerance, p.reflection, m.fabric.friction * friction_scale,
                                               self.contact, self.contact_n, self.body_v, self.hit_buf,
-                                              self.touched_buf)
+                                              self.touched_buf, 1.0 / p.push_time)
         t2 = time.perf_counter()
         # positions (eq. 3); Provot's position modification when chosen as the comparison
         if not ahead and self.collider is not None:  # (hold_contacts in the same pass: counted as the cloth's)
