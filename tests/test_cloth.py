@@ -1345,7 +1345,7 @@ def test_a_point_deep_in_the_band_moves_out_over_the_push_time(push_time):
         v = np.zeros((1, 3))
         contact, contact_n, vb = np.zeros(1, np.bool_), np.zeros((1, 3)), np.zeros((1, 3))
         hits = K.collision_response(v, np.array([1], np.int8), np.array([[0.0, 1.0, 0.0]]), np.zeros((1, 3)),
-                                    np.array([depth]), v.copy(), 1, np.zeros((0, 4), np.int32), np.zeros((0, 3), np.int32),
-                                    tol, 0.0, 0.4, 1e-4, contact, contact_n, vb, 1.0 / push_time)
+                                    np.array([depth]), v.copy(), 1, np.zeros((0, 4), np.int32),
+                                    np.zeros((0, 3), np.int32), tol, 0.0, 0.4, 1e-4, contact, contact_n, vb, 1.0 / push_time)
         assert hits == 1 and contact[0]
         np.testing.assert_allclose(v[0], [0.0, want, 0.0], rtol=1e-12, atol=1e-15)

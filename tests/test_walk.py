@@ -540,7 +540,8 @@ def test_object_space_walk(walked):
                                                ("stiffen_at", 0.0, "stiffen_at"),
                                                ("collide_every", 17, "collide_every"),
                                                ("vm_passes", 0, "vm_passes"), ("strain_guard", -0.1, "strain_guard"),
-                                               ("flexion_every", 0, "flexion_every"), ("flexion_every", 17, "flexion_every"),
+                                               ("flexion_every", 0, "flexion_every"),
+                                               ("flexion_every", 17, "flexion_every"),
                                                ("push_time", 0.0, "push_time"), ("push_time", 5.0, "push_time")])
 def test_walk_options_refuse_absurd_solver_settings(field, value, words):
     from engine.errors import InputError

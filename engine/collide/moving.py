@@ -178,8 +178,9 @@ CHUNK = 512  # points a claim takes
 
 
 @serial_kernel
-def _work(ctl, r, tally, par, pre_pts, pts, n_vertices, quads, tris, surf, vel, has_vel, kind, side_src, geom, layout, zz,
-          c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index):
+def _work(ctl, r, tally, par, pre_pts, pts, n_vertices, quads, tris, surf, vel, has_vel, kind, side_src, geom,
+          layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
+          status, surface, penetration, normal, velocity, map_index):
     """Answer chunks of request r (_query_cached with the parameters in par: t, tol, widened,
     shift_t, vmax, root_v, the root's offset; ctl[SERIAL]; the world points pre_pts or pts,
     ctl[WHICH]) until none is left to claim (engine.collide.server.claim: each chunk by one
@@ -200,28 +201,30 @@ def _work(ctl, r, tally, par, pre_pts, pts, n_vertices, quads, tris, surf, vel, 
             off[k] = par[8 + k]
         points = pts if ctl[WHICH] != 0 else pre_pts
         k = _query_cached(points, off, c * CHUNK, min(n, (c + 1) * CHUNK), par[0], ctl[SERIAL], par[1], par[2], par[3],
-                          root_v, par[4], REACH, MAX_AGE, SLACK, NEAR, n_vertices, quads, tris, surf, vel, has_vel, kind, side_src, geom,
-                          layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
+                          root_v, par[4], REACH, MAX_AGE, SLACK, NEAR, n_vertices, quads, tris, surf, vel,
+                          has_vel, kind, side_src, geom, layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
                           status, surface, penetration, normal, velocity, map_index)
         asked += k
         chunk_done(ctl, tally, k)
 
 
 @serial_kernel
-def _help(ctl, wait, par, pre_pts, pts, n_vertices, quads, tris, surf, vel, has_vel, kind, side_src, geom, layout, zz,
-          c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index):
+def _help(ctl, wait, par, pre_pts, pts, n_vertices, quads, tris, surf, vel, has_vel, kind, side_src, geom,
+          layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
+          status, surface, penetration, normal, velocity, map_index):
     """The solver's thread: answer what is left of the last request (_work), then wait for the
     chunks the server holds. Returns the ticks it waited, or -1 when a chunk was not finished
     within `wait` time-stamp counter ticks (the server's thread died holding it)."""
-    _work(ctl, atomic_load(ctl, REQ), SOLVER_CHUNKS, par, pre_pts, pts, n_vertices, quads, tris, surf, vel, has_vel, kind,
-          side_src, geom, layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
+    _work(ctl, atomic_load(ctl, REQ), SOLVER_CHUNKS, par, pre_pts, pts, n_vertices, quads, tris, surf, vel,
+          has_vel, kind, side_src, geom, layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
           status, surface, penetration, normal, velocity, map_index)
     return wait_chunks(ctl, wait)
 
 
 @serial_kernel
-def _serve(ctl, par, pre_pts, pts, n_vertices, quads, tris, surf, vel, has_vel, kind, side_src, geom, layout, zz,
-           c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index):
+def _serve(ctl, par, pre_pts, pts, n_vertices, quads, tris, surf, vel, has_vel, kind, side_src, geom,
+           layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
+           status, surface, penetration, normal, velocity, map_index):
     """The query server's kernel (engine.collide.server; TrackCollider._post) for one frame's
     maps: takes chunks of each request (_work) beside the solver's thread; returns on
     ctl[STOP], or after IDLE ticks without a request."""
@@ -232,8 +235,9 @@ def _serve(ctl, par, pre_pts, pts, n_vertices, quads, tris, surf, vel, has_vel, 
         if r < 0:
             return
         last = r
-        _work(ctl, r, SERVER_CHUNKS, par, pre_pts, pts, n_vertices, quads, tris, surf, vel, has_vel, kind, side_src, geom, layout, zz,
-              c_local, c_time, c_frame, c_pen, c_un, c_surf, status, surface, penetration, normal, velocity, map_index)
+        _work(ctl, r, SERVER_CHUNKS, par, pre_pts, pts, n_vertices, quads, tris, surf, vel, has_vel, kind, side_src,
+              geom, layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
+              status, surface, penetration, normal, velocity, map_index)
         atomic_store(ctl, DONE, r)
 
 
@@ -528,10 +532,10 @@ class TrackCollider:
         (engine.cloth.kernels.collision_points) -- and this collider makes them: the caller
         writes the vertex rows only. Each query's chunk makes its own face points (_face_point),
         so on the query server's thread for the chunks it answers, instead of on the solver's
-        before every query (the solver asks for this: engine.cloth.solver). Measured,
-        scripts/bench_ab.py --walk 4 on the 3,883-vertex dress, six interleaved rounds: 0.91 x
-        the time a frame (collision 7.4 against 9.9 ms a frame, medians), the same frames bit
-        for bit."""
+        before every query (the solver asks for this: engine.cloth.solver). The same frames bit
+        for bit. Measured, scripts/bench_ab.py --walk 4 on the 3,883-vertex dress, three A/Bs
+        of six interleaved rounds: 0.91, 0.99 and 1.01 x the time a frame (median 0.98 over the
+        18 rounds, faster in 11) -- within the machine's spread."""
         self._stop_server()
         self._n_vertices = np.int64(n_vertices)
         self._quads = np.ascontiguousarray(quads, dtype=np.int32)
