@@ -24,7 +24,9 @@ frames' maxima, penetration max; realtime factors of one process each on this no
   shirt     x1: 7.2 % / 6.5 %, 3.5 mm, 0.216 | x0.25: 13.5 % / 7.0 %, 1.4 mm, 0.275 | x0.0625: 33.3 % / 7.5 %
 The strain peaks are a few springs for a few frames (the dress's armholes as an arm swings back,
 the trousers' hips); with stiffening at threshold + 10 % the trousers went to x0.5 at frame 11
-(18.2 %) and then stayed at 7.3 % (median); the others never stiffened.
+(18.2 %) and then stayed at 7.3 % (median); the others never stiffened. Since the pelvis no
+longer jolts at heel strike (engine.body.motion._pelvis_path) none stiffens: strain max 7.7 %
+(dress), 14.9 % (trousers; median 8.1), 7.4 % (skirt), 7.7 % (shirt).
 
 A periodic walk's maps (the ramp and one cycle) are rendered before the walking stage
 (WalkOptions.prerender; `map_prerender_seconds`), and the walk expands their float16 copies.
