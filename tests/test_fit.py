@@ -57,7 +57,7 @@ def test_the_sample_scan_walks_without_its_skin_folding():
     is off the scan by more than its edges; fit_rig smooths them over the scan's surface below
     the waist (smooth_weights). Measured on the sample scan walking 2 s (every 2nd frame), edges
     folded: 1,220 in all before, 75 in the worst frame (its knees and groin crumpled, and the
-    dress showed it), ~1,000 of them below the waist; 69 after, 16 below the waist (the rest at
+    dress showed it), 1,159 of them below the waist; 69 after, 16 below the waist (the rest at
     the armpits, whose weights stay as transferred). The weights stay a convex mix:
     non-negative, summing to 1; above the waist they are the transferred ones."""
     from engine.body.measure import measure
