@@ -399,7 +399,7 @@ def _pelvis_path(offs: np.ndarray, start: int, period: int, shift: np.ndarray, s
         ramp *= (x * x * (3.0 - 2.0 * x))[:, None]
         lead = np.clip((k - (start - pad)) / pad, 0.0, 1.0)
         beta = (lead * lead * (3.0 - 2.0 * lead))[:, None]
-        tail = dev[start + period - start:start + period] if start <= period else np.zeros_like(ramp)
+        tail = dev[start + (k - start) % period]  # the cycle's, run back before it
         dev[:start] = (1.0 - beta) * ramp + beta * tail
     return offs + dev
 
