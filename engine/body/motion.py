@@ -422,12 +422,9 @@ def leg_share(body: Body) -> np.ndarray:
         y_ankle = rig.rest_transforms[names.index(ankle)][1, 3]
         below = np.zeros(len(names), bool)
         below[names.index(hip)] = True
-        grew = True
-        while grew:  # the hip's descendants
-            kids = (rig.parents >= 0) & ~below
-            kids[kids] = below[rig.parents[kids]]
-            below |= kids
-            grew = bool(kids.any())
+        for j in range(len(names)):  # the hip's descendants (parents come first: _chain_product)
+            if rig.parents[j] >= 0 and below[rig.parents[j]]:
+                below[j] = True
         y = rig.rest_transforms[below, 1, 3]
         share[below] = np.clip((y_hip - y) / max(y_hip - y_ankle, 1e-6), 0.0, 1.0)
     return np.einsum("nk,nk->n", rig.skin_weights, share[rig.skin_indices])
@@ -477,8 +474,10 @@ def walk_track(body: Body, params: WalkParams | None = None, fps: float = 30.0) 
     h = 1.0 / (fps * FINE)
     buf = np.empty_like(rv)
 
-    def placed(k):  # (N, 3) each vertex's offset at fine step k: the pelvis's, the legs' toward the planted
-        k = min(max(k, 0), len(offs) - 1)
+    def placed(k):
+        """(N, 3) each vertex's offset at fine step k (before the walk: as at 0): the pelvis's,
+        and the legs' toward the planted one."""
+        k = max(k, 0)
         return smooth[k] + share * (offs[k] - smooth[k])
 
     for i in range(n):
@@ -492,12 +491,8 @@ def walk_track(body: Body, params: WalkParams | None = None, fps: float = 30.0) 
             k = i * FINE + s
             m = joint_matrices(rig, pose_joints(rig, w.deltas(t + s * h)))
             _skin_kernel(rv, idx, wts, m, buf)
-            if k < 0:
-                pos.append(buf + placed(0))
-            elif k < len(offs):
-                pos.append(buf + placed(k))
-            else:
-                pos.append(buf + 2 * placed(len(offs) - 1) - placed(len(offs) - 2))
+            o = placed(k) if k < len(offs) else 2 * placed(len(offs) - 1) - placed(len(offs) - 2)
+            pos.append(buf + o)
         vel[i] = (pos[1] - pos[0]) / (2 * h)
     frame_offs[:, 1] = 0.0  # the lift is in the frames
     speed = float(np.linalg.norm(shift)) / w.period if not p.in_place else stride / w.period
