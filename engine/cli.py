@@ -21,6 +21,13 @@ BODY_HELP = ("A mesh file (.obj .ply .stl .off .glb .gltf) or the default body: 
              "default:male, optionally with shape parameters, e.g. default:female,height=1.72,weight=0.6")
 UP_HELP = "Up axis of a scan when detection is unsure: +x -x +y -y +z -z"
 FRONT_HELP = "Axis the scan faces when detection is unsure: +x -x +y -y +z -z"
+GARMENT_HELP = ("A catalogue garment (see `tryon garments`), a GarmentCode pattern file (.json), or a DXF cutting "
+                "pattern (.dxf: its seams and placement inferred, see `tryon pattern import`).")
+SIZE_HELP = ("Catalogue size: XS, S, M, L, XL, XXL (default M), on the women's or men's chart: a default body's own, "
+             "any other body's by its waist-to-hip ratio; a DXF pattern's own size names (default: its sample "
+             "size); or auto: the smallest size whose girths cover the body's (catalogue: the chart's; DXF: the "
+             "pieces' chest or hip width, with ease), and if that drapes too small (refused, or tight: stretched "
+             "past the fabric's limit + 1 %), the next larger, up to two more.")
 
 
 def _fail(msg: str, code: int) -> None:
@@ -146,9 +153,8 @@ def _progress_printer():
 @app.command("drape")
 def drape_cmd(
     body: str = typer.Option(..., "--body", help=BODY_HELP),
-    garment: str = typer.Option(..., "--garment", help="A catalogue garment (see `tryon garments`) or a "
-                                "GarmentCode pattern file (.json)."),
-    size: Optional[str] = typer.Option(None, "--size", help="Catalogue size: XS, S, M, L, XL, XXL (default M), on the women's or men's chart: a default body's own, any other body's by its waist-to-hip ratio; or auto: the smallest size whose chart girths cover the body's, and if that drapes too small (refused, or tight: stretched past the fabric's limit + 1 %), the next larger, up to two more."),
+    garment: str = typer.Option(..., "--garment", help=GARMENT_HELP),
+    size: Optional[str] = typer.Option(None, "--size", help=SIZE_HELP),
     fabric: str = typer.Option("cotton", "--fabric", help="cotton, denim, silk or jersey."),
     out: Path = typer.Option(Path("out/drape"), "--out", help="Output directory."),
     resolution: float = typer.Option(1.5, "--resolution", help="Cloth edge length in cm."),
@@ -216,9 +222,8 @@ def drape_cmd(
 @app.command("walk")
 def walk_cmd(
     body: str = typer.Option(..., "--body", help=BODY_HELP),
-    garment: str = typer.Option(..., "--garment", help="A catalogue garment (see `tryon garments`) or a "
-                                "GarmentCode pattern file (.json)."),
-    size: Optional[str] = typer.Option(None, "--size", help="Catalogue size: XS, S, M, L, XL, XXL (default M), on the women's or men's chart: a default body's own, any other body's by its waist-to-hip ratio; or auto: the smallest size whose chart girths cover the body's, and if that drapes too small (refused, or tight: stretched past the fabric's limit + 1 %), the next larger, up to two more."),
+    garment: str = typer.Option(..., "--garment", help=GARMENT_HELP),
+    size: Optional[str] = typer.Option(None, "--size", help=SIZE_HELP),
     fabric: str = typer.Option("cotton", "--fabric", help="cotton, denim, silk or jersey."),
     seconds: float = typer.Option(4.0, "--seconds", help="How long to walk (s), after dressing."),
     fps: float = typer.Option(30.0, "--fps", help="Body frames (and output frames) per second; an uploaded .zip of OBJ frames plays at this rate, an animated .glb is sampled at it."),
@@ -344,34 +349,54 @@ app.add_typer(pattern_app, name="pattern")
 
 @pattern_app.command("import")
 def pattern_import_cmd(
-    dxf: Path = typer.Argument(..., help="A DXF of the pattern pieces (ASTM D6673 / AAMA: one block per piece, "
-                               "boundary on layer 1, turn points on layer 2; or closed polylines)."),
-    assembly: Optional[Path] = typer.Option(None, "--assembly", help="JSON with what a DXF does not hold: "
-                                            "stitches ({panel, edge} pairs, edge numbers as in the SVG), each "
-                                            "panel's translation (cm) and rotation (degrees), copies of pieces cut "
-                                            "twice (copy_of, mirror), the tryon block (fabric)."),
+    dxf: Path = typer.Argument(..., help="A DXF cutting pattern as pattern CAD exports it (ASTM D6673 / AAMA: a block "
+                               "per piece per graded size, the cut line on layer 1 in one or several parts; or "
+                               "closed outlines in a plain drawing)."),
+    size: Optional[str] = typer.Option(None, "--size", help="Which of the pattern's sizes (default: its sample size, "
+                                       "else its middle one)."),
+    assembly: Optional[Path] = typer.Option(None, "--assembly", help="An assembly file (JSON) to use instead of the "
+                                            "inferred seams: the assembly.json an import writes, corrected (panels "
+                                            "by piece and role; seams between spans of their outlines, corners "
+                                            "numbered as in pattern.svg), or GarmentCode's kind (stitches by "
+                                            "{panel, edge}, each panel's translation and rotation, copy_of)."),
     units: Optional[str] = typer.Option(None, "--units", help="mm, cm, m or in, when the DXF does not say."),
-    out: Path = typer.Option(Path("out/pattern"), "--out", help="Directory for pattern.json and pattern.svg."),
+    out: Path = typer.Option(Path("out/pattern"), "--out", help="Directory for pattern.json, pattern.svg and "
+                             "assembly.json."),
+    as_json: bool = typer.Option(False, "--json", help="Print a summary as JSON: units, sizes, pieces (quantity; per "
+                                 "size area cm^2, perimeter cm, notches, grain line), layers, the garment inferred."),
 ):
-    """Turn a DXF cutting pattern into a GarmentCode specification (pattern.json, for `tryon drape
-    --garment`) and an SVG of its panels with every edge numbered."""
+    """Read a DXF cutting pattern, every piece in every graded size, and turn one size into a
+    GarmentCode specification: without --assembly the garment is inferred (which pieces, which
+    seams, where each piece goes on the body). Writes pattern.json (for `tryon drape --garment`;
+    drape also takes the DXF itself), pattern.svg (the panels, each seam in its own colour and
+    numbered) and assembly.json (the inference, to correct and give back with --assembly)."""
 
     def go():
-        from engine.pattern.dxf import import_dxf, load_assembly
-        from engine.pattern.io import pattern_to_svg, save_pattern
+        from engine.pattern.dxf import import_pattern, load_assembly, summary
+        from engine.pattern.io import save_pattern
         from engine.pattern.validate import check
 
         asm = load_assembly(assembly) if assembly is not None else None
-        spec, notes = import_dxf(dxf, asm, units)
-        problems = check(spec, dxf.name)  # errors raise; warnings come back
+        imp = import_pattern(dxf, size, units, asm)
+        problems = check(imp.spec, dxf.name)  # errors raise; warnings come back
         out.mkdir(parents=True, exist_ok=True)
-        for name, p in spec.pattern.panels.items():
-            typer.echo(f"{name}: {len(p.edges)} edges", err=True)
-        for line in [f"note: {n}" for n in notes] + [str(p) for p in problems]:
+        written = [save_pattern(imp.spec, out / "pattern.json"), out / "pattern.svg"]
+        (out / "pattern.svg").write_text(imp.svg())
+        if imp.assembly is not None:
+            (out / "assembly.json").write_text(json.dumps(imp.assembly, indent=1))
+            written.append(out / "assembly.json")
+        p = imp.pattern
+        typer.echo(f"{dxf.name}: {len(p.pieces)} pieces x {len(p.sizes)} sizes ({', '.join(p.sizes)}); units "
+                   f"{p.units_note}; size {imp.size}: {imp.kind}, {len(imp.spec.pattern.panels)} panels, "
+                   f"{len(imp.spec.pattern.stitches)} stitches", err=True)
+        for line in ([f"note: {n}" for n in p.notes + imp.notes] + [f"left out: {n}" for n in imp.left_out]
+                     + [f"unsure: {n}" for n in imp.unsure] + [str(q) for q in problems]):
             typer.echo(line, err=True)
-        (out / "pattern.svg").write_text(pattern_to_svg(spec, edge_numbers=True))
-        typer.echo(str(save_pattern(spec, out / "pattern.json")))
-        typer.echo(str(out / "pattern.svg"))
+        if as_json:
+            typer.echo(json.dumps(summary(p, imp), indent=1))
+        else:
+            for w in written:
+                typer.echo(str(w))
 
     _run(go)
 

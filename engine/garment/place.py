@@ -580,9 +580,12 @@ def pattern_placement(spec, body: Body):
     Returns (placement, a note or None)."""
     from engine.body.measure import measure
     from engine.errors import TryonError
+    from engine.garment.dxf_place import dxf_placement, has_roles
     from engine.garment.garment import spec_placement
     from engine.pattern import geometry as geo
 
+    if has_roles(spec):  # a pattern imported from DXF: placed by its inferred roles
+        return dxf_placement(spec, body)
     own = spec_placement(spec, body.to_world)
     try:
         m = measure(body)

@@ -12,14 +12,51 @@ from engine.pattern.io import load_pattern
 PATTERN_SIZE_ADVICE = "a pattern has one size: grade it larger for this body"
 
 
+def is_dxf(arg: str) -> bool:
+    return Path(arg).suffix.lower() == ".dxf"
+
+
+def dxf_garment(path: Path, body: Body, size: str | None):
+    """(spec, None, display name) of a DXF cutting pattern in one of its sizes: its sample size
+    (else its middle one) by default; `auto`: the smallest whose girth covers the body's with
+    ease (engine.pattern.dxf_size). Its seams and placement are inferred."""
+    from engine.pattern.dxf import import_pattern
+    from engine.pattern.dxf_read import read_pattern
+
+    path = Path(path)
+    pattern = read_pattern(path)
+    how = ""
+    if size == "auto":
+        from engine.body.measure import measure
+        from engine.pattern.dxf_size import recommend_size
+
+        m = measure(body)
+        size, why = recommend_size(pattern, {"chest": 100 * m.bust, "hips": 100 * m.hips})
+        how = f", {why}"
+    imp = import_pattern(path, size, pattern=pattern)
+    if imp.kind == "pieces":
+        raise InputError(f"{path.name}: {'; '.join(imp.unsure)}")
+    return imp.spec, None, f"{path.name} (size {imp.size}{how})"
+
+
+def dxf_sizes(path: Path, body: Body) -> list[str]:
+    """--size auto on a DXF: the recommended size and the larger ones after it."""
+    from engine.body.measure import measure
+    from engine.pattern.dxf_read import read_pattern
+    from engine.pattern.dxf_size import recommend_size
+
+    pattern = read_pattern(path)
+    m = measure(body)
+    first, _ = recommend_size(pattern, {"chest": 100 * m.bust, "hips": 100 * m.hips})
+    return pattern.sizes[pattern.sizes.index(first):]
+
+
 def resolve_garment(arg: str, body: Body, size: str | None = "M"):
     """Returns (PatternSpec, placement function or None for the spec's own, display name).
     size: catalogue size; None means the default (M) for catalogue garments."""
     path = Path(arg)
-    if path.suffix.lower() == ".dxf":
-        raise InputError(f"{path.name}: a DXF holds the pieces but no seams or placement; import it with its assembly "
-                         f"file first (tryon pattern import {path.name} --assembly ASSEMBLY.json --out DIR) and "
-                         "give DIR/pattern.json")
+    if is_dxf(arg):  # a cutting pattern: its seams inferred, in one of its sizes
+        return dxf_garment(path, body, size)
     if path.suffix.lower() == ".json" or path.exists():
         if size is not None:
             raise InputError(f"--size {size} applies to catalogue garments; a pattern file ({path.name}) "
@@ -43,6 +80,8 @@ def add_size_hint(err: Exception, arg: str, body: Body, size: str | None) -> Non
     from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES, recommend_size
 
     if not getattr(err, "too_small", False):
+        return
+    if is_dxf(arg):  # a DXF has its graded sizes
         return
     if arg not in CATALOGUE:  # a pattern file has one size: "try a larger size" means grading it
         msg = str(err).replace("(try a larger size)", "(a pattern has one size: grade it larger)")
@@ -166,21 +205,26 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
             return loaded
         return res
 
-    if arg not in CATALOGUE or size != AUTO:
+    if (arg not in CATALOGUE and not is_dxf(arg)) or size != AUTO:
         try:
             return attempt(lambda b: resolve_garment(arg, b, size))
         except SimulationError as e:
             add_size_hint(e, arg, body, size)  # (only a too-small error; not the arms in the way)
             raise
-    first = SIZES.index(recommend_size(arg, body))
-    sizes = SIZES[first:first + 1 + AUTO_TRIES]
+    if is_dxf(arg):  # the pattern's own sizes from the one its girths recommend
+        sizes = dxf_sizes(Path(arg), body)[:1 + AUTO_TRIES]
+        make = dxf_garment
+    else:
+        first = SIZES.index(recommend_size(arg, body))
+        sizes = SIZES[first:first + 1 + AUTO_TRIES]
+        make = make_garment
     tried: list[dict] = []
     tight = None  # the least stretched tight result so far: (result, report, size)
     for k, s in enumerate(sizes):
         how = "chosen from the body's girths" if not tried else \
             f"chosen by draping: {', '.join(t['size'] for t in tried)} too small"
         try:
-            res, report = attempt(lambda b: make_garment(arg, b, s), lambda name: name[:-1] + f", {how})")
+            res, report = attempt(lambda b: make(arg, b, s), lambda name: name[:-1] + f", {how})")
         except SimulationError as e:
             if not getattr(e, "too_small", False):
                 raise
