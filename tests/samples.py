@@ -7,6 +7,7 @@ SAMPLES = ROOT.parent / "shared" / "samples" / "garmentcode"
 SAMPLE_BODY = SAMPLES / "mean_female.obj"
 SAMPLE_YAML = SAMPLES / "mean_female.yaml"
 SAMPLE_SKIRT = SAMPLES / "flare_skirt_specification.json"
+DXF_SAMPLES = ROOT.parent / "shared" / "samples" / "dxf"  # real pattern-CAD exports (their README)
 # GarmentCode's own T-shirt (tests/garmentcode/README.md): a sleeved pattern file
 GC_SHIRT = ROOT / "tests" / "garmentcode" / "shirt_mean_specification.json"
 

@@ -16,11 +16,13 @@ garments are placed:
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from engine.body.types import Body
 from engine.errors import InputError
-from engine.garment.place import BodySections, LegSections, wrap_torso, wrap_trousers
+from engine.garment.place import CLEARANCE, BodySections, LegSections, wrap_torso
 from engine.pattern import geometry as geo
 from engine.pattern.spec import PanelHint, PatternSpec
 
@@ -171,46 +173,122 @@ def _extent(outline: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return np.where(np.isfinite(lo), lo, 0.0), np.where(np.isfinite(hi), hi, 0.0)
 
 
+@dataclass
+class LegFrame:
+    """What wrap_leg needs of a one-piece leg panel (metres, its frame): its outline, its front
+    and back waist points (where the rises start), the world heights of its waist top and crotch."""
+
+    outline: np.ndarray
+    wf: np.ndarray
+    wb: np.ndarray
+    top: float
+    crotch_y: float
+    knee_v: float = -np.inf  # below this panel height the rows are drawn up (heights)
+    squeeze: float = 1.0  # ... by this factor, so that the hem stays above the foot
+
+    def height(self, v: np.ndarray) -> np.ndarray:
+        """World heights of panel rows v."""
+        v = np.asarray(v, dtype=np.float64)
+        return self.top + np.where(v >= self.knee_v, v, self.knee_v + self.squeeze * (v - self.knee_v))
+
+    def centres(self, v: float) -> tuple[float, float]:
+        """u of the centre back and centre front lines at height v: the rises, straight up above
+        their waist points."""
+        lo, hi = _extent(self.outline, np.array([v]))
+        u_b = float(lo[0]) if v <= self.wb[1] else float(self.wb[0])
+        u_f = float(hi[0]) if v <= self.wf[1] else float(self.wf[0])
+        return u_b, u_f
+
+
 def _legs(names: list[str], hints, outlines, b: _Body, scale: float) -> dict:
-    """One-piece legs (panel frame: waist top at v = 0, side line at u = 0, front toward +u):
-    each half is a catalogue trouser panel measured from its own centre line (the front from
-    the front waist point, the back from the back's), wrapped by wrap_trousers."""
+    """One-piece legs (panel frame: waist top at v = 0, the side line at u = 0, front toward +u),
+    placed by wrap_leg, the crotch CROTCH_BELOW under the body's."""
     o = outlines[names[0]]
     h = hints[names[0]]
-    wf, wb, cf = _pt(h, "wf", scale), _pt(h, "wb", scale), _pt(h, "cf", scale)
-    u_f, u_b = float(wf[0]), float(-wb[0])
-    top = b.crotch - CROTCH_BELOW - float(cf[1])
-    crotch_y = top + float(cf[1])
-    vs = np.arange(float(o[:, 1].min()) - 0.01, 0.011, 0.01)
-    lo, hi = _extent(o, vs)
-    half = np.minimum(hi, u_f) + np.minimum(-lo, u_b)
-    full = hi - lo
-    k_lo, k_hi = _extent(o, np.array([b.knee - top]))
-    crease = {"front": u_f - 0.5 * float(k_hi[0]), "back": u_b + 0.5 * float(k_lo[0])}
-    legs = LegSections(b.body, lowest=top + float(o[:, 1].min()))
-
-    def half_girth(v):
-        return float(np.interp(v, vs, half))
-
-    def leg_girth(v):
-        return float(np.interp(v, vs, full))
+    crotch_v = min(float(_pt(h, "cf", scale)[1]), float(_pt(h, "cb", scale)[1]))
+    top = b.crotch - CROTCH_BELOW - crotch_v
+    frame = LegFrame(o, _pt(h, "wf", scale), _pt(h, "wb", scale), top, top + crotch_v)
+    hem_v = float(o[:, 1].min())
+    floor = _hem_floor(LegSections(b.body, lowest=1.0), o, hem_v)  # (the legs' own cuts: no tube round the foot)
+    if top + hem_v < floor:  # longer than the leg: drawn up below the knee, to bunch at the ankle
+        frame.knee_v = b.knee - top
+        frame.squeeze = (b.knee - floor) / max(b.knee - top - hem_v, 1e-3)
+    legs = LegSections(b.body, lowest=float(frame.height(np.array([hem_v]))[0]))
 
     def placer(side: str):
-        leg = 1 if side == "left" else -1
-
         def place(uv):
-            out = np.zeros((len(uv), 3))
-            front = uv[:, 0] >= 0
-            for sel, which, centre in ((front, "front", u_f), (~front, "back", u_b)):
-                if sel.any():
-                    u = leg * (centre - np.abs(uv[sel, 0]))
-                    out[sel] = wrap_trousers(np.stack([u, uv[sel, 1]], axis=1), which, leg, top, crotch_y,
-                                             leg * crease[which], b.sections, legs, half_girth, leg_girth)
-            return out
+            return wrap_leg(uv, side, frame, b.sections, legs)
 
         return place
 
     return {n: placer("left" if hints[n].region == "left_leg" else "right") for n in names}
+
+
+HEM_STRETCH = 1.10  # a hem may start round the leg stretched this much
+
+
+def _hem_floor(legs: LegSections, outline: np.ndarray, hem_v: float) -> float:
+    """The lowest height (m) where a leg's hem fits round the body's leg: the leg's covering
+    girth there at most HEM_STRETCH x the hem's width (below the ankle the foot grows fast:
+    a legging's 21 cm hem placed 4 cm above the floor was stretched 39 %)."""
+    from engine.garment.place import _half_perimeter
+
+    lo, hi = _extent(outline, np.array([hem_v + 0.005]))
+    hem = float(hi[0] - lo[0])
+    ys = np.arange(0.02, 0.45, 0.005)
+    ell = legs.at(ys, 1)
+    girth = np.array([2 * _half_perimeter(a, bb) for _, _, a, bb, _ in ell])
+    fits = np.flatnonzero(girth <= HEM_STRETCH * hem)
+    return float(ys[fits[0]]) if len(fits) else float(ys[-1])
+
+
+LEG_BLEND = 0.10  # m above the crotch over which a leg goes from its own leg's tube to the torso's
+
+
+def wrap_leg(uv: np.ndarray, side: str, f: LegFrame, torso: BodySections, legs: LegSections) -> np.ndarray:
+    """(n, 2) points of a one-piece leg (metres; v = 0 at the waist top, u = 0 on the side line,
+    front toward +u) -> (n, 3) round the body. Below the crotch each row goes round its own leg's
+    ellipse from the leg's outer side, the front half forward and the back half backward, its
+    width spread over the whole way round (a legging cut smaller than the leg starts stretched
+    onto it, its inseams met); above the crotch the row spans the torso's half ellipse on its
+    side from the centre back line to the centre front line (LegFrame.centres) in proportion,
+    so the rises lie on the body's centre lines and meet the other leg's; in between
+    (LEG_BLEND) the two are blended, as wrap_trousers blends. The ellipses are the covering
+    cross-sections grown by CLEARANCE (and to the row's width, where it is wider)."""
+    from engine.garment.place import _ellipse_arcs, _ellipse_point, _half_perimeter
+
+    sgn = 1.0 if side == "left" else -1.0
+    leg = 1 if side == "left" else -1
+    u, v = uv[:, 0], uv[:, 1]
+    y = f.height(v)
+    rows = np.round(v / 0.01).astype(int)
+    out_t, out_l = np.zeros((len(uv), 3)), np.zeros((len(uv), 3))
+    for r in np.unique(rows):
+        sel = rows == r
+        yr = float(f.height(np.array([r * 0.01]))[0])
+        lo, hi = _extent(f.outline, np.array([r * 0.01]))
+        width = max(float(hi[0] - lo[0]), 1e-3)
+        u_b, u_f = f.centres(r * 0.01)
+        cx, cz, a, bb, kc = torso.at(np.array([max(yr, f.crotch_y)]), grown=True)[0]
+        a, bb = a + CLEARANCE, bb + CLEARANCE
+        k = max(1.0 / kc, (u_f - u_b) / _half_perimeter(a, bb))
+        a, bb = a * k, bb * k
+        t = np.clip((u[sel] - u_b) / max(u_f - u_b, 1e-3), 0.0, 1.0)  # CB 0 .. CF 1
+        sn, cs = _ellipse_point(a, bb, sgn * (1.0 - t) * _half_perimeter(a, bb),
+                                _ellipse_arcs(np.array([a]), np.array([bb]))[0])
+        out_t[sel] = np.stack([cx + a * sn, y[sel], cz + bb * cs], axis=1)
+        cx, cz, a, bb, kc = legs.at(np.array([min(yr, f.crotch_y)]), leg)[0]
+        a, bb = a + CLEARANCE, bb + CLEARANCE
+        k = max(1.0 / kc, width / (2 * _half_perimeter(a, bb)))
+        a, bb = a * k, bb * k
+        arcs = _ellipse_arcs(np.array([a]), np.array([bb]))[0]
+        quarter = float(np.interp(np.pi / 2, np.linspace(-np.pi, np.pi, len(arcs)), arcs))
+        spread = 2 * _half_perimeter(a, bb) / width
+        half = 0.5 * (arcs[-1] - arcs[0])  # the arcs run from -half (theta -pi) to +half: wrap into them
+        sn, cs = _ellipse_point(a, bb, (sgn * (quarter - spread * u[sel]) + half) % (2 * half) - half, arcs)
+        out_l[sel] = np.stack([cx + a * sn, y[sel], cz + bb * cs], axis=1)
+    g = np.clip((y - f.crotch_y) / LEG_BLEND, 0.0, 1.0)[:, None] ** 0.9
+    return g * out_t + (1 - g) * out_l
 
 
 # ------------------------------------------------------------------ bands
@@ -237,7 +315,6 @@ def _band(name: str, spec: PatternSpec, placers: dict):
     owners = [partner[e][0] for e in chain]
     _orient(loop_3d, away_3d, [(partner[e][0], partner[e][1], len(panels[partner[e][0]].edges)) for e in chain])
     _close_loop(loop_3d, owners)
-    _fit_loop(loop_3d, sum(geo.polyline_length(b) for b in band_2d))
 
     def place(uv):
         k, t, d = _project(uv, band_2d)
@@ -337,21 +414,6 @@ def _close_loop(loop: list[np.ndarray], owners: list[str]) -> None:
             n = len(loop[i])
             loop[i] += (1 - f[at:at + n, None]) * d0 + f[at:at + n, None] * d1
             at += n
-
-
-def _fit_loop(loop: list[np.ndarray], length: float) -> None:
-    """The loop drawn in (in place, across the body's axis: x and z) toward its middle until it
-    is no longer than the band (length, m): where the panels it runs along start apart (a
-    neckline across the gaps of the shoulder seams), a band laid along it started stretched
-    by up to 80 % and, pulling together, lifted the whole top up the body while it was sewn."""
-    pts = np.concatenate(loop)
-    now = sum(geo.polyline_length(p) for p in loop)
-    if now <= length:
-        return
-    k = length / now
-    c = pts.mean(axis=0)
-    for p in loop:
-        p[:, [0, 2]] = c[[0, 2]] + k * (p[:, [0, 2]] - c[[0, 2]])
 
 
 def _project(uv: np.ndarray, lines: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

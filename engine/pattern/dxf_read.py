@@ -132,7 +132,7 @@ def _points(e) -> np.ndarray | None:
         return None  # polyface and polygon meshes
     if t == "POLYLINE" and not any(v.dxf.get("bulge", 0) for v in e.vertices):
         pts = np.array([(p[0], p[1]) for p in e.points()], dtype=np.float64).reshape(-1, 2)
-    elif t in ("POLYLINE", "LWPOLYLINE", "ARC", "SPLINE", "ELLIPSE", "CIRCLE"):
+    elif t in ("POLYLINE", "LWPOLYLINE", "ARC", "SPLINE"):
         from ezdxf import path as dxfpath
 
         try:
