@@ -280,7 +280,7 @@ def test_every_sample_export_imports_all_its_pieces_and_sizes(name):
     if p.sizes[0].isdigit():
         assert [int(s) for s in p.sizes] == sorted(int(s) for s in p.sizes)
     # the sample size's area of every piece within 0.5 % of the shoelace area of its chained cut line
-    areas = {k: v for k, v in piece_areas(p).items() if k[1] == p.sample_size}
+    areas = piece_areas(p, [p.sample_size])
     assert len(areas) == len(p.pieces)
     assert max(abs(a / f - 1) for a, f in areas.values()) < 0.005
     # grading: a piece grows with the size (its first and last sizes)
@@ -433,3 +433,40 @@ def test_size_auto_takes_the_smallest_size_with_room_for_the_body():
     assert garment_girth(p, smaller)[1] < 101 + EASE_CM["chest"]
     with pytest.raises(InputError, match="larger than the largest size"):
         recommend_size(p, {"chest": 300.0})
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name, body, fabric", [
+    ("MEN_CLASSIC_TEE.DXF", "default:male", "cotton"),
+    ("GMH1006F18_AAMA.DXF", "default:male", "cotton"),
+    ("ORILEGWB_AAMA.DXF", "default:female,height=1.52,weight=0.05", "jersey"),
+])
+def test_a_dxf_alone_drapes_in_its_middle_size(name, body, fabric):
+    """Seams inferred, nothing else given: settled, seams closed, no penetration beyond the
+    usual bars; a top's sleeves go round the arms and its collar round the neck, leggings'
+    legs round the legs."""
+    from engine.body import resolve_body
+    from engine.body.measure import measure
+    from engine.scene.garments import resolve_garment
+    from engine.scene.tryon import run_tryon
+
+    b = resolve_body(body)
+    p = sample(name)
+    spec, place, label = resolve_garment(str(DXF_SAMPLES / name), b, p.sizes[len(p.sizes) // 2])
+    res, rep = run_tryon(b, spec, place=place, source=label, fabric=fabric)
+    assert rep["settled"]
+    gap = rep["seam_gap_mm"]  # closed: welded within 1 cm, or a few pairs by the stall rule within 2 cm
+    assert gap["max"] < 10 or (gap["snapped"] <= 4 and gap["max"] <= 20), gap
+    assert rep["penetration_mm"]["max"] <= 3.0 and rep["penetration_mm"]["p99"] <= 1.0
+    assert rep["strain"]["max"] <= rep["strain"]["threshold"] + 0.10  # (not refused; leggings: tight)
+    x, m = res.positions, measure(b)
+    if "leg_l" in spec.pattern.panels:  # cloth round both legs at the knee, none above the waist
+        knee = np.abs(x[:, 1] - m.knee_height) < 0.03
+        assert (x[knee, 0] > 0.03).sum() > 20 and (x[knee, 0] < -0.03).sum() > 20
+        assert x[:, 1].max() < m.waist_height + 0.05
+        return
+    sh = m.shoulder_height
+    arm = (np.abs(x[:, 0]) > 0.5 * m.shoulder_width + 0.05) & (x[:, 1] < sh)  # out past the shoulders
+    assert (arm & (x[:, 0] > 0)).sum() > 100 and (arm & (x[:, 0] < 0)).sum() > 100
+    neck = (np.abs(x[:, 0]) < 0.06) & (x[:, 1] > sh + 0.02)  # round the neck: before and behind it
+    assert (neck & (x[:, 2] > 0)).sum() > 5 and (neck & (x[:, 2] < 0)).sum() > 5

@@ -401,12 +401,12 @@ def _order(order: list[str] | None, panels: dict) -> list[str]:
     return list(order) + [n for n in panels if n not in order]
 
 
-def piece_areas(pattern: DxfPattern) -> dict[tuple[str, str], tuple[float, float]]:
+def piece_areas(pattern: DxfPattern, sizes: list[str] | None = None) -> dict[tuple[str, str], tuple[float, float]]:
     """(piece, size) -> (the area of its panel between its corners, the shoelace area of its
-    chained layer-1 cut line), cm^2, for every piece in every size."""
+    chained layer-1 cut line), cm^2, for every piece in every size (or those of `sizes`)."""
     out = {}
     for p in pattern.pieces:
-        for size in p.shapes:
+        for size in (s for s in p.shapes if sizes is None or s in sizes):
             outline, corners = corners_of(p, size)
             panel = PatternSpec.model_validate({"pattern": {"panels": {"p": piece_to_panel(
                 Piece(p.name, outline, corners))}}}).pattern.panels["p"]
