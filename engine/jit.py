@@ -1,25 +1,70 @@
-"""The decorator for serial numba kernels, and atomic array reads and writes for kernels that
-hand work between threads (imports numba only; the bottom of the engine).
+"""The engine's numba decorators (every kernel file takes them from here), and atomic array reads
+and writes for kernels that hand work between threads (imports numba only; the bottom of the engine).
 
 `serial_kernel` compiles with numba's parallel pipeline switched on, although the kernels have
-no prange and run on one thread: measured on numba 0.68 (scripts/bench_kernels.py), the same
-serial loop compiled this way runs 3-9x faster (the velocity modification: ~58 -> ~14 ns a
-spring and pass; a map query near the body: ~430 -> ~50 ns a point) with bit-identical results. A kernel so
-decorated must hold no array expression or np.zeros/np.ones (numba would turn those into
-parallel loops on its thread pool, which stall when another process holds a core): take
-buffers from the caller, or allocate with np.empty and fill in a loop.
+no prange and run on one thread: the same serial loop compiled this way runs several times
+faster, bit for bit (docs/tuning.md, `serial_kernel`). A kernel so decorated must hold no array
+expression or np.zeros/np.ones (numba would turn those into parallel loops on its thread pool,
+which stall when another process holds a core): take buffers from the caller, or allocate with
+np.empty and fill in a loop.
+
+The on-disk cache of every engine kernel is keyed by the text of all the engine's kernel files
+(KernelCacheLocator): a kernel inlines helpers from other files, and numba's own key (the
+defining file's time stamp) would let a kernel compiled against an old helper run silently.
 """
 
 from __future__ import annotations
 
+import hashlib
 import warnings
+from functools import lru_cache
+from pathlib import Path
 
-from numba import njit
+import numba
+from numba import njit, prange  # noqa: F401  (re-exported: kernel files take numba's decorators from here)
+from numba.core.caching import CacheImpl, InTreeCacheLocator
 from numba.core.errors import NumbaPerformanceWarning
 
 # "parallel=True was specified but no transformation for parallel execution was possible":
 # that is the point here
 warnings.filterwarnings("ignore", category=NumbaPerformanceWarning, message=r"(?s).*parallel=True.*")
+
+ENGINE = Path(__file__).resolve().parent
+
+
+def kernel_sources(root: Path = ENGINE) -> list[Path]:
+    """The engine's files that define numba kernels (they import their decorators from engine.jit)."""
+    return sorted(p for p in root.rglob("*.py")
+                  if p.name == "jit.py" or "from engine.jit import" in p.read_text(encoding="utf-8"))
+
+
+@lru_cache(maxsize=None)
+def kernel_sources_stamp(root: Path = ENGINE) -> str:
+    """A hash of the text of every kernel file: the cache key of every engine kernel."""
+    h = hashlib.sha256(numba.__version__.encode())
+    for p in kernel_sources(root):
+        h.update(str(p.relative_to(root)).encode() + b"\0" + p.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+class KernelCacheLocator(InTreeCacheLocator):
+    """numba's in-tree cache (beside the source, in __pycache__) for the engine's kernels, stamped
+    with kernel_sources_stamp instead of the defining file's time stamp and size."""
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        try:
+            Path(py_file).resolve().relative_to(ENGINE)
+        except ValueError:
+            return None
+        return super().from_function(py_func, py_file)
+
+    def get_source_stamp(self):
+        return kernel_sources_stamp()
+
+
+if KernelCacheLocator not in CacheImpl._locator_classes:
+    CacheImpl._locator_classes.insert(0, KernelCacheLocator)
 
 
 def serial_kernel(fn=None, *, fastmath: bool = True, error_model: str = "python"):

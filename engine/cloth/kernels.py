@@ -10,9 +10,8 @@ Arrays: x, v (N, 3) float64; springs (S, 2) int32 with rest lengths and stiffnes
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
-from engine.jit import serial_kernel
+from engine.jit import njit, serial_kernel
 
 VM_ZERO, VM_AVERAGE, VM_DIRECTIONAL, VM_PROVOT = 0, 1, 2, 3
 MAX_PUSH = 1.0  # m/s: fastest a collision response moves a point out of the body

@@ -33,7 +33,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+
+from engine.jit import njit, prange
 
 CLEAR, BAND, INSIDE = 0, 1, 2
 

@@ -77,7 +77,6 @@ import time
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
-from numba import njit
 
 from engine.body.motion import BodyTrack
 from engine.body.types import Body
@@ -87,7 +86,7 @@ from engine.collide.maps import CollisionMaps, MapRenderer
 from engine.collide.query import query_point_into
 from engine.collide.server import (ASKED, DONE, HELP_WAIT, REQ, RUNNING, SERVER_CHUNKS, SOLVER_CHUNKS, SpinServer,
                                    StallWatch, after_help, chunk_done, claim, helper_default, serve_wait, wait_chunks)
-from engine.jit import atomic_load, atomic_store, serial_kernel
+from engine.jit import atomic_load, atomic_store, njit, serial_kernel
 
 REACH = 0.002  # m: a point that moved this far (in the root's frame) since its answer asks again
 MAX_AGE = 0.002  # s: ... and so does an answer this old

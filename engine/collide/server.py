@@ -34,10 +34,9 @@ from collections import deque
 from queue import Queue
 
 import numpy as np
-from numba import njit
 
 from engine.errors import SimulationError
-from engine.jit import atomic_add, atomic_cas, atomic_load, atomic_store, cycle_counter, spin_pause
+from engine.jit import atomic_add, atomic_cas, atomic_load, atomic_store, cycle_counter, njit, spin_pause
 
 REQ, DONE, STOP, RUNNING = range(4)  # control words; the kernels may use ctl[4:] for their own
 # ... and a request answered in chunks (post_chunks; claim, chunk_done, wait_chunks): points the
