@@ -41,7 +41,7 @@ bench-peer: setup
 clean:
 	rm -rf out .pytest_cache
 
-# numba's compiled kernels (cached beside the sources, in __pycache__, keyed by the text of every
-# kernel file: engine/jit.py): delete them to force a fresh compile (a minute or two).
+# numba's compiled kernels (cached beside the sources, in __pycache__, keyed by the text of each
+# kernel file and the kernel files it imports: engine/jit.py): delete them to compile afresh.
 clean-kernels:
 	find engine -path '*/__pycache__/*' \( -name '*.nbi' -o -name '*.nbc' \) -delete

@@ -8,13 +8,15 @@ expression or np.zeros/np.ones (numba would turn those into parallel loops on it
 which stall when another process holds a core): take buffers from the caller, or allocate with
 np.empty and fill in a loop.
 
-The on-disk cache of every engine kernel is keyed by the text of all the engine's kernel files
-(KernelCacheLocator): a kernel inlines helpers from other files, and numba's own key (the
-defining file's time stamp) would let a kernel compiled against an old helper run silently.
+The on-disk cache of an engine kernel is keyed by the text of its file and of every kernel file
+that file imports, directly or not (KernelCacheLocator): a kernel inlines helpers from other
+files, and numba's own key (the defining file's time stamp) would let a kernel compiled against
+an old helper run silently.
 """
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import warnings
 from functools import lru_cache
@@ -38,18 +40,44 @@ def kernel_sources(root: Path = ENGINE) -> list[Path]:
                   if p.name == "jit.py" or "from engine.jit import" in p.read_text(encoding="utf-8"))
 
 
+def _imported_files(path: Path, root: Path) -> set[Path]:
+    """The engine files that `path` imports (from engine.x import ..., import engine.x)."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        names = [node.module] if isinstance(node, ast.ImportFrom) and node.module else \
+            [a.name for a in node.names] if isinstance(node, ast.Import) else []
+        for name in names:
+            parts = name.split(".")
+            if parts[0] != "engine":
+                continue
+            base = root.joinpath(*parts[1:])
+            for f in (base.with_suffix(".py"), base / "__init__.py"):
+                if f.is_file():
+                    out.add(f.resolve())
+    return out
+
+
 @lru_cache(maxsize=None)
-def kernel_sources_stamp(root: Path = ENGINE) -> str:
-    """A hash of the text of every kernel file: the cache key of every engine kernel."""
+def kernel_stamp(path: Path, root: Path = ENGINE) -> str:
+    """The cache key of the kernels in `path`: a hash of its text and of every kernel file it
+    imports, directly or through other kernel files, with numba's version."""
+    kernels = {p.resolve() for p in kernel_sources(root)}
+    seen, todo = set(), [path.resolve()]
+    while todo:
+        f = todo.pop()
+        if f in seen:
+            continue
+        seen.add(f)
+        todo += [g for g in _imported_files(f, root) if g in kernels]
     h = hashlib.sha256(numba.__version__.encode())
-    for p in kernel_sources(root):
-        h.update(str(p.relative_to(root)).encode() + b"\0" + p.read_bytes() + b"\0")
+    for f in sorted(seen):
+        h.update(f.relative_to(root.resolve()).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
     return h.hexdigest()
 
 
 class KernelCacheLocator(InTreeCacheLocator):
     """numba's in-tree cache (beside the source, in __pycache__) for the engine's kernels, stamped
-    with kernel_sources_stamp instead of the defining file's time stamp and size."""
+    with kernel_stamp instead of the defining file's time stamp and size."""
 
     @classmethod
     def from_function(cls, py_func, py_file):
@@ -60,7 +88,7 @@ class KernelCacheLocator(InTreeCacheLocator):
         return super().from_function(py_func, py_file)
 
     def get_source_stamp(self):
-        return kernel_sources_stamp()
+        return kernel_stamp(Path(self._py_file))
 
 
 if KernelCacheLocator not in CacheImpl._locator_classes:

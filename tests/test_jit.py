@@ -160,9 +160,9 @@ def test_serial_kernel_matches_plain_njit(fn):
         assert outs[0][0] > 0
 
 
-def test_the_kernel_cache_key_covers_every_kernel_file(tmp_path):
-    """A kernel inlines helpers from other files: its cache must go stale when any kernel file
-    changes, not only its own (engine.jit.KernelCacheLocator)."""
+def test_the_kernel_cache_key_covers_the_kernel_files_it_imports(tmp_path):
+    """A kernel inlines helpers from other files: its cache must go stale when a kernel file it
+    imports changes, not only its own (engine.jit.KernelCacheLocator)."""
     import shutil
 
     from engine import jit
@@ -172,20 +172,25 @@ def test_the_kernel_cache_key_covers_every_kernel_file(tmp_path):
     names = {p.relative_to(root).as_posix() for p in jit.kernel_sources(root)}
     assert {"jit.py", "cloth/kernels.py", "collide/server.py", "collide/moving.py", "collide/query.py"} <= names
     assert "cli.py" not in names  # (no kernels)
-    before = jit.kernel_sources_stamp.__wrapped__(root)
-    helper = root / "collide" / "server.py"
+    moving, kernels = root / "collide" / "moving.py", root / "cloth" / "kernels.py"
+    stamp = jit.kernel_stamp.__wrapped__
+    before = {f: stamp(f, root) for f in (moving, kernels)}
+    helper = root / "collide" / "server.py"  # inlined into moving.py's kernels, not into kernels.py's
     helper.write_text(helper.read_text() + "\n# an edit to an inlined helper's file\n")
-    assert jit.kernel_sources_stamp.__wrapped__(root) != before
-    (root / "cli.py").write_text((root / "cli.py").read_text() + "\n# not a kernel file\n")
-    helper.write_text(helper.read_text().removesuffix("\n# an edit to an inlined helper's file\n"))
-    assert jit.kernel_sources_stamp.__wrapped__(root) == before
+    assert stamp(moving, root) != before[moving]
+    assert stamp(kernels, root) == before[kernels]
+    jit_py = root / "jit.py"  # (both take their decorators from it)
+    jit_py.write_text(jit_py.read_text() + "\n# an edit\n")
+    assert stamp(kernels, root) != before[kernels]
 
 
 def test_engine_kernels_are_cached_under_that_key():
+    from pathlib import Path
+
     from engine import jit
 
     assert K.integrate_positions._cache._impl.locator.__class__ is jit.KernelCacheLocator
-    assert K.integrate_positions._cache._impl.locator.get_source_stamp() == jit.kernel_sources_stamp()
+    assert K.integrate_positions._cache._impl.locator.get_source_stamp() == jit.kernel_stamp(Path(K.__file__))
     for p in jit.ENGINE.rglob("*.py"):  # every kernel file takes numba's decorators from engine.jit
         if p.name != "jit.py":
             assert "from numba import" not in p.read_text(), p
