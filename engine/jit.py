@@ -108,6 +108,9 @@ def serial_kernel(fn=None, *, fastmath: bool = True, error_model: str = "python"
 from numba import types as _types  # noqa: E402
 from numba.core import cgutils as _cgutils  # noqa: E402
 from numba.extending import intrinsic as _intrinsic  # noqa: E402
+from numba.extending import overload  # noqa: E402, F401  (re-exported)
+
+nbtypes = _types  # (re-exported: numba's types, for overloads)
 
 
 def _item_pointer(context, builder, signature, args):
