@@ -8,7 +8,6 @@ from engine.body.types import Body
 from engine.errors import InputError
 from engine.pattern.io import load_pattern
 
-
 PATTERN_SIZE_ADVICE = "a pattern has one size: grade it larger for this body"
 
 
