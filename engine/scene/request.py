@@ -8,7 +8,6 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from engine.body.motion import WalkParams
 from engine.cloth.fabrics import get_fabric
 from engine.errors import InputError
 
@@ -70,7 +69,10 @@ class TryOnOptions(BaseModel):
         return None if self.dt_ms is None else self.dt_ms / 1000.0
 
     @property
-    def walk(self) -> WalkParams:
+    def walk(self):
+        """The procedural walk's parameters (engine.body.motion.WalkParams)."""
+        from engine.body.motion import WalkParams
+
         return WalkParams(speed=self.speed, stride=self.stride, in_place=self.in_place)
 
     @classmethod
@@ -103,6 +105,9 @@ def plain_error(model: type[BaseModel], err: dict, names: dict[str, str]) -> str
 class TryOnRequest(TryOnOptions):
     """A try-on: the garment (a catalogue name, or a pattern) and its size, and how to simulate."""
 
-    garment: str = Field(..., description="a catalogue name, or a pattern")
-    size: str | None = Field(None, description="catalogue size XS..XXL, or auto: the smallest that covers the "
-                             "body's girths and drapes without being too small (default M); not for patterns")
+    garment: str = Field(..., description="a catalogue garment (see `tryon garments`) or a pattern: a "
+                         "GarmentCode JSON file (the service: the id of an uploaded pattern)")
+    size: str | None = Field(None, description="catalogue size XS, S, M, L, XL, XXL (default M), on the women's or "
+                             "men's chart (a default body's own, any other body's by its waist-to-hip ratio); or "
+                             "auto: the smallest size whose chart girths cover the body's, and if that drapes too "
+                             "small, the next larger, up to two more. Not for patterns")
