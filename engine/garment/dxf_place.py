@@ -142,7 +142,8 @@ def _sewn_to(spec: PatternSpec, name: str) -> list[tuple[int, str, int]]:
 def _sleeve(name: str, spec: PatternSpec, hints, placers, outline: np.ndarray, b: _Body):
     """The catalogue's sleeve placer, the cap's top at the shoulder point of the bodice panels
     its cap is sewn to (their points sp_l / sp_r, as placed)."""
-    from engine.pattern.catalogue import SleevePlan, _sleeve_placer
+    from engine.garment.catalogue import _sleeve_placer
+    from engine.pattern.catalogue import SleevePlan
 
     side = "left" if hints[name].region == "left_arm" else "right"
     key = "sp_l" if side == "left" else "sp_r"
@@ -158,19 +159,6 @@ def _sleeve(name: str, spec: PatternSpec, hints, placers, outline: np.ndarray, b
 
 
 # ------------------------------------------------------------------ legs
-
-
-def _extent(outline: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(u min, u max) of a closed outline (M, 2) along horizontal lines at heights v (K,)."""
-    a, c = outline, np.roll(outline, -1, axis=0)
-    vv = v[:, None]
-    cross = (a[None, :, 1] - vv) * (c[None, :, 1] - vv) <= 0
-    rise = np.where(c[:, 1] != a[:, 1], c[:, 1] - a[:, 1], 1.0)
-    t = np.clip((vv - a[None, :, 1]) / rise[None, :], 0, 1)
-    xs = a[None, :, 0] + t * (c[None, :, 0] - a[None, :, 0])
-    lo = np.where(cross, xs, np.inf).min(axis=1)
-    hi = np.where(cross, xs, -np.inf).max(axis=1)
-    return np.where(np.isfinite(lo), lo, 0.0), np.where(np.isfinite(hi), hi, 0.0)
 
 
 @dataclass
@@ -194,7 +182,7 @@ class LegFrame:
     def centres(self, v: float) -> tuple[float, float]:
         """u of the centre back and centre front lines at height v: the rises, straight up above
         their waist points."""
-        lo, hi = _extent(self.outline, np.array([v]))
+        lo, hi = geo.row_extent(self.outline, np.array([v]))
         u_b = float(lo[0]) if v <= self.wb[1] else float(self.wb[0])
         u_f = float(hi[0]) if v <= self.wf[1] else float(self.wf[0])
         return u_b, u_f
@@ -233,7 +221,7 @@ def _hem_floor(legs: LegSections, outline: np.ndarray, hem_v: float) -> float:
     a legging's 21 cm hem placed 4 cm above the floor was stretched 39 %)."""
     from engine.garment.place import _half_perimeter
 
-    lo, hi = _extent(outline, np.array([hem_v + 0.005]))
+    lo, hi = geo.row_extent(outline, np.array([hem_v + 0.005]))
     hem = float(hi[0] - lo[0])
     ys = np.arange(0.02, 0.45, 0.005)
     ell = legs.at(ys, 1)
@@ -266,7 +254,7 @@ def wrap_leg(uv: np.ndarray, side: str, f: LegFrame, torso: BodySections, legs: 
     for r in np.unique(rows):
         sel = rows == r
         yr = float(f.height(np.array([r * 0.01]))[0])
-        lo, hi = _extent(f.outline, np.array([r * 0.01]))
+        lo, hi = geo.row_extent(f.outline, np.array([r * 0.01]))
         width = max(float(hi[0] - lo[0]), 1e-3)
         u_b, u_f = f.centres(r * 0.01)
         cx, cz, a, bb, kc = torso.at(np.array([max(yr, f.crotch_y)]), grown=True)[0]

@@ -580,12 +580,9 @@ def pattern_placement(spec, body: Body):
     and default:male before its 5 cm shoulder seams closed; wrapped, it sews on both.
     Returns (placement, a note or None)."""
     from engine.body.measure import measure
-    from engine.garment.dxf_place import dxf_placement, has_roles
     from engine.garment.garment import spec_placement
     from engine.pattern import geometry as geo
 
-    if has_roles(spec):  # a pattern imported from DXF: placed by its inferred roles
-        return dxf_placement(spec, body)
     own = spec_placement(spec, body.to_world)
     try:
         m = measure(body)

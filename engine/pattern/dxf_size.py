@@ -14,18 +14,14 @@ import numpy as np
 from engine.errors import InputError
 from engine.pattern.dxf_infer import infer, point_at
 from engine.pattern.dxf_read import DxfPattern
+from engine.pattern.geometry import row_extent
 
 EASE_CM = {"chest": 6.0, "hips": 2.0}  # garment girth less body girth, at least
 
 
 def _width_at(outline: np.ndarray, v: float) -> float:
-    a, b = outline, np.roll(outline, -1, axis=0)
-    cross = (a[:, 1] - v) * (b[:, 1] - v) <= 0
-    if not cross.any():
-        return 0.0
-    t = np.clip((v - a[cross, 1]) / np.where(b[cross, 1] != a[cross, 1], b[cross, 1] - a[cross, 1], 1.0), 0, 1)
-    xs = a[cross, 0] + t * (b[cross, 0] - a[cross, 0])
-    return float(xs.max() - xs.min())
+    lo, hi = row_extent(outline, np.array([v]))
+    return float(hi[0] - lo[0])
 
 
 def garment_girth(pattern: DxfPattern, size: str) -> tuple[str, float] | None:

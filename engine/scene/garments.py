@@ -11,12 +11,20 @@ from engine.pattern.io import load_pattern
 PATTERN_SIZE_ADVICE = "a pattern has one size: grade it larger for this body"
 
 
+def _roles_placement(spec, body: Body):
+    """The placement of a pattern whose panels carry a DXF inference's roles (engine.garment.
+    dxf_place), else None (the pattern's own, engine.garment.place.pattern_placement)."""
+    from engine.garment.dxf_place import dxf_placement, has_roles
+
+    return dxf_placement(spec, body)[0] if body is not None and has_roles(spec) else None
+
+
 def is_dxf(arg: str) -> bool:
     return Path(arg).suffix.lower() == ".dxf"
 
 
 def dxf_garment(path: Path, body: Body, size: str | None):
-    """(spec, None, display name) of a DXF cutting pattern in one of its sizes: its sample size
+    """(spec, placement, display name) of a DXF cutting pattern in one of its sizes: its sample size
     (else its middle one) by default; `auto`: the smallest whose girth covers the body's with
     ease (engine.pattern.dxf_size). Its seams and placement are inferred."""
     from engine.pattern.dxf import import_pattern
@@ -35,7 +43,7 @@ def dxf_garment(path: Path, body: Body, size: str | None):
     imp = import_pattern(path, size, pattern=pattern)
     if imp.kind == "pieces":
         raise InputError(f"{path.name}: {'; '.join(imp.unsure)}")
-    return imp.spec, None, f"{path.name} (size {imp.size}{how})"
+    return imp.spec, _roles_placement(imp.spec, body), f"{path.name} (size {imp.size}{how})"
 
 
 def dxf_sizes(path: Path, body: Body) -> list[str]:
@@ -61,7 +69,7 @@ def resolve_garment(arg: str, body: Body, size: str | None = "M"):
             raise InputError(f"--size {size} applies to catalogue garments; a pattern file ({path.name}) "
                              "has its own size: leave --size out")
         spec = load_pattern(path)
-        return spec, None, path.name
+        return spec, _roles_placement(spec, body), path.name
     size = size or "M"
     from engine.garment.catalogue import make_garment
     from engine.pattern.catalogue import CATALOGUE
