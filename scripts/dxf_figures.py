@@ -64,12 +64,11 @@ def table() -> None:
 
 def drape_one(path: Path, body_name: str, size: str, out: Path, fabric: str = "cotton") -> dict:
     from engine.body import resolve_body
-    from engine.scene.garments import resolve_garment
-    from engine.scene.tryon import run_tryon, write_outputs
+    from engine.scene.request import TryOnRequest
+    from engine.scene.tryon import dress_request, write_outputs
 
     body = resolve_body(body_name)
-    spec, place, name = resolve_garment(str(path), body, size)
-    res, rep = run_tryon(body, spec, place=place, source=name, fabric=fabric)
+    res, rep = dress_request(body, TryOnRequest(garment=str(path), size=size, fabric=fabric))
     write_outputs(out, body, res, rep)
     return rep
 

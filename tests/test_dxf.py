@@ -447,13 +447,14 @@ def test_a_dxf_alone_drapes_in_its_middle_size(name, body, fabric):
     legs round the legs."""
     from engine.body import resolve_body
     from engine.body.measure import measure
-    from engine.scene.garments import resolve_garment
-    from engine.scene.tryon import run_tryon
+    from engine.scene.request import TryOnRequest
+    from engine.scene.tryon import dress_request
 
     b = resolve_body(body)
     p = sample(name)
-    spec, place, label = resolve_garment(str(DXF_SAMPLES / name), b, p.sizes[len(p.sizes) // 2])
-    res, rep = run_tryon(b, spec, place=place, source=label, fabric=fabric)
+    res, rep = dress_request(b, TryOnRequest(garment=str(DXF_SAMPLES / name), size=p.sizes[len(p.sizes) // 2],
+                                             fabric=fabric))
+    spec = res.spec
     assert rep["settled"]
     gap = rep["seam_gap_mm"]  # closed: welded within 1 cm, or a few pairs by the stall rule within 2 cm
     assert gap["max"] < 10 or (gap["snapped"] <= 4 and gap["max"] <= 20), gap
@@ -470,3 +471,23 @@ def test_a_dxf_alone_drapes_in_its_middle_size(name, body, fabric):
     assert (arm & (x[:, 0] > 0)).sum() > 100 and (arm & (x[:, 0] < 0)).sum() > 100
     neck = (np.abs(x[:, 0]) < 0.06) & (x[:, 1] > sh + 0.02)  # round the neck: before and behind it
     assert (neck & (x[:, 2] > 0)).sum() > 5 and (neck & (x[:, 2] < 0)).sum() > 5
+
+
+def test_a_sew_line_is_what_is_simulated(tmp_path):
+    """A piece with seam allowance: its sew line (layer 14) is the panel's outline, not the cut line."""
+    from engine.pattern.dxf import summary
+
+    doc = ezdxf.new("R12")
+    blk = doc.blocks.new("P")
+    blk.add_text("Piece Name: PATCH")
+    blk.add_polyline2d([(0, 0), (300, 0), (300, 200), (0, 200)], close=True, dxfattribs={"layer": "1"})
+    blk.add_polyline2d([(10, 10), (290, 10), (290, 190), (10, 190)], close=True, dxfattribs={"layer": "14"})
+    doc.modelspace().add_blockref("P", (0, 0))
+    doc.modelspace().add_text("Units: METRIC")
+    doc.saveas(str(tmp_path / "patch.dxf"))
+    p = read_pattern(tmp_path / "patch.dxf")
+    sh = p.pieces[0].shapes["one size"]
+    assert sh.file_area == pytest.approx(600.0) and sh.area == pytest.approx(28 * 18)  # cm^2 (mm in the file)
+    (a, f), = piece_areas(p).values()
+    assert f == pytest.approx(28 * 18) and abs(a / f - 1) < 1e-6
+    assert summary(p)["pieces"][0]["sizes"]["one size"]["sew_line_area_cm2"] == pytest.approx(504.0)

@@ -260,7 +260,7 @@ def _areas(spec: PatternSpec, parts: list[Part], pattern: DxfPattern, size: str)
     for p in parts:
         panel = spec.pattern.panels[p.name]
         area = abs(geo.signed_area(geo.outline(panel, 1.0, True, AREA_SAMPLES)))
-        file_area = pattern.piece(p.piece).shapes[size].file_area * (2 if p.unfolded else 1) * p.stretch
+        file_area = pattern.piece(p.piece).shapes[size].area * (2 if p.unfolded else 1) * p.stretch
         out[p.name] = (area, file_area)
     return out
 
@@ -411,7 +411,7 @@ def piece_areas(pattern: DxfPattern, sizes: list[str] | None = None) -> dict[tup
             panel = PatternSpec.model_validate({"pattern": {"panels": {"p": piece_to_panel(
                 Piece(p.name, outline, corners))}}}).pattern.panels["p"]
             out[(p.name, size)] = (abs(geo.signed_area(geo.outline(panel, 1.0, True, AREA_SAMPLES))),
-                                   p.shapes[size].file_area)
+                                   p.shapes[size].area)
     return out
 
 
@@ -433,7 +433,8 @@ def summary(pattern: DxfPattern, imported: Imported | None = None) -> dict:
                              "perimeter_cm": round(float(geo.polyline_length(np.vstack([sh.outline, sh.outline[:1]]))), 2),
                              "notches": int(len(sh.notches)), "grain_line": sh.grain is not None,
                              "drill_holes": int(len(sh.drills)), "internal_lines": len(sh.internal),
-                             "mirror_line": bool(sh.mirror), "sew_line": sh.sew is not None}
+                             "mirror_line": bool(sh.mirror), "sew_line": sh.sew is not None,
+                             **({"sew_line_area_cm2": round(sh.area, 2)} if sh.sew is not None else {})}
         pieces.append({"name": p.name, "quantity": p.quantity, "cut": p.cut, "category": p.category,
                        "annotation": p.annotation, "fabric": p.fabric, "sizes": per, "notes": p.notes})
     out = {"file": pattern.source, "style": pattern.style, "units": pattern.units, "units_note": pattern.units_note,

@@ -324,6 +324,9 @@ def make_part(name: str, piece: DxfPiece, size: str, role: str) -> Part:
     shape = piece.shapes[size]
     outline, corners = corners_of(piece, size)
     notches = shape.notches.copy()
+    if shape.sew is not None and len(notches):  # notches cut into the allowance: onto the sew line
+        near = np.linalg.norm(notches[:, None] - outline[None], axis=2)
+        notches = outline[near.argmin(axis=1)][near.min(axis=1) < 2.5]
     fold = _fold_of(outline, shape.mirror)
     unfolded = fold is not None
     if unfolded:

@@ -73,6 +73,12 @@ class Shape:
     sew: np.ndarray | None  # (M, 2) the sew line (layer 14), closed, or None
     other: dict[str, list[np.ndarray]] = field(default_factory=dict)  # layer -> point lists
 
+    @property
+    def area(self) -> float:
+        """cm^2: the shoelace area of the line simulated -- the sew line where there is one, else
+        the chained cut line."""
+        return self.file_area if self.sew is None else abs(geo.signed_area(self.sew))
+
 
 @dataclass
 class DxfPiece:
@@ -615,15 +621,29 @@ def corners_of(piece: DxfPiece, size: str) -> tuple[np.ndarray, list[int]]:
     of the piece has them (each snapped to its outline vertex, or inserted on its segment), else
     the points where its cut line's parts meet and where the line turns sharper than CORNER_DEG;
     a round piece (fewer than two) gets four corners a quarter of its length apart. The same
-    rule in every size, so a piece's edges are numbered alike in all its sizes."""
+    rule in every size, so a piece's edges are numbered alike in all its sizes. Where the file
+    carries a sew line (the cut line less its seam allowance), the outline is the sew line,
+    where the seams are sewn: the simulated cloth ends there."""
     sh = piece.shapes[size]
+    if sh.sew is not None:  # the sew line: where the seams are (its own sharp turns are its corners)
+        return _sharp_corners(sh.sew.copy(), [])
     poly = sh.outline.copy()
     if all(len(s.turn) for s in piece.shapes.values()):
         poly, idx = _snap_turns(poly, sh.turn)
-    else:
-        prev, nxt = poly - np.roll(poly, 1, axis=0), np.roll(poly, -1, axis=0) - poly
-        cos = (prev * nxt).sum(1) / np.maximum(np.linalg.norm(prev, axis=1) * np.linalg.norm(nxt, axis=1), 1e-18)
-        idx = sorted(set(sh.breaks) | set(np.flatnonzero(cos < np.cos(np.radians(CORNER_DEG))).tolist()))
+        return _round_corners(poly, idx)
+    return _sharp_corners(poly, sh.breaks)
+
+
+def _sharp_corners(poly: np.ndarray, breaks: list[int]) -> tuple[np.ndarray, list[int]]:
+    """The breaks and the points where the outline turns sharper than CORNER_DEG."""
+    prev, nxt = poly - np.roll(poly, 1, axis=0), np.roll(poly, -1, axis=0) - poly
+    cos = (prev * nxt).sum(1) / np.maximum(np.linalg.norm(prev, axis=1) * np.linalg.norm(nxt, axis=1), 1e-18)
+    sharp = np.flatnonzero(cos < np.cos(np.radians(CORNER_DEG))).tolist()
+    return _round_corners(poly, sorted(set(breaks) | set(sharp)))
+
+
+def _round_corners(poly: np.ndarray, idx: list[int]) -> tuple[np.ndarray, list[int]]:
+    """idx as the corners; a round piece (fewer than two) four, a quarter of its length apart."""
     if len(idx) < 2:  # a round piece: four edges of equal length
         s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(np.vstack([poly, poly[:1]]), axis=0), axis=1))])
         start, total = (idx[0] if idx else 0), s[-1]

@@ -41,7 +41,7 @@ def _layout(parts: list[Part]) -> tuple[dict[str, np.ndarray], float, float]:
 def imported_svg(parts: list[Part], seams: list[Seam], title: str, notes: list[str]) -> str:
     offsets, width, height = _layout(parts)
     legend = [title] + [f"{k + 1}  {s.label}" for k, s in enumerate(seams)] + notes
-    total_h = height + LINE * (len(legend) + 1)
+    total_h = height + LINE * (len(legend) + 2)
 
     def xy(p):  # sheet cm (y up) -> svg (y down)
         return p[..., 0], -p[..., 1]
@@ -62,7 +62,7 @@ def imported_svg(parts: list[Part], seams: list[Seam], title: str, notes: list[s
             m = len(x) // 2
             out.append(f'<text x="{x[m]:.2f}" y="{y[m]:.2f}" font-size="2.6" font-weight="bold" fill="{c}" '
                        f'stroke="#fff" stroke-width="0.15">{k + 1}</text>')
-    y0 = height + LINE
+    y0 = height + 2 * LINE
     for i, line in enumerate(legend):
         c = COLOURS[(i - 1) % len(COLOURS)] if 1 <= i <= len(seams) else "#222"
         out.append(f'<text x="{MARGIN:.2f}" y="{y0 + i * LINE:.2f}" font-size="1.9" fill="{c}">{escape(line)}</text>')
