@@ -36,7 +36,7 @@ from engine.errors import InputError
 from engine.pattern import geometry as geo
 
 CHAIN_TOL_CM = 0.05  # cut-line parts whose ends are this close (0.5 mm) are joined
-MAX_DXF_BYTES = 40_000_000  # the largest real export seen is 1.5 MB (17 pieces x 15 sizes)
+MAX_DXF_BYTES = 20_000_000  # the largest real export seen is 1.5 MB (17 pieces x 15 sizes)
 MAX_ENTITIES = 1_000_000
 MAX_PIECE_VERTICES = 100_000  # per piece and size (a real cut line: 100-1,000)
 MAX_PARTS = 2_000  # cut-line parts per piece and size (real: 1-15)
