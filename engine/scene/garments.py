@@ -153,9 +153,8 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
     (kw: `lift`, passed on to engine.scene.tryon.run_tryon).
     With --size auto on a catalogue garment, the size recommended from the body's girths comes
     first; if it comes out too small -- its drape refused it (seams that cannot close, cloth
-    stretched past DrapeOptions.too_tight) or ended tight (report["tight"]) -- the next larger
-    size is dressed, up to AUTO_TRIES more (measured: the sample scan's fuller bust leaves its
-    L dress at 11-22 % strain, its XL dress at 5.9 %). The report's `sizes_tried` lists the
+    stretched past DrapeTuning.too_tight) or ended tight (report["tight"]) -- the next larger
+    size is dressed, up to AUTO_TRIES more (a chart does not know a fuller bust). The report's `sizes_tried` lists the
     sizes found too small and why; `note(size, why, next size)` is called before each retry.
     When every size tried is too small, the least stretched tight result is returned (its
     warnings say so), or the last refusal raised. Other sizes and pattern files are dressed
