@@ -6,7 +6,7 @@ OUT ?= out/demo
 
 PORT ?= 8000
 
-.PHONY: setup run demo test test-slow bench bench-peer clean clean-kernels
+.PHONY: setup run demo test test-unit test-slow bench bench-peer clean clean-kernels
 
 setup:
 	@bash scripts/setup.sh
@@ -27,6 +27,10 @@ PYTEST_ARGS ?= -n auto --maxprocesses 4
 
 test: setup
 	$(VENV)/python -m pytest -m "not slow" -q $(PYTEST_ARGS)
+
+# the unit tier: no dressing, walking, service or browser; one process, under a minute
+test-unit: setup
+	$(VENV)/python -m pytest -m "not slow and not integration" -q -n 0
 
 test-slow: setup
 	$(VENV)/python -m pytest -m slow -q $(PYTEST_ARGS)

@@ -11,6 +11,8 @@ from app.main import create_app
 from app.settings import Settings
 from tests.samples import SAMPLE_BODY, SAMPLE_SKIRT, write_anim_zip, write_arms_lowered_scan
 
+pytestmark = pytest.mark.integration  # (dresses, walks, or runs the service)
+
 
 def _settings(tmp_path, **kw):
     return Settings(data_dir=tmp_path / "data", **kw)

@@ -240,6 +240,7 @@ def test_pattern_commands(tmp_path):
     assert not (tmp_path / "bad").exists()
 
 
+@pytest.mark.integration
 def test_drape_takes_a_dxf_by_its_own_size_names(tmp_path):
     r = CliRunner().invoke(app, ["drape", "--body", "default:male", "--garment", str(DXF_SAMPLES / "WM_SLIM_TANK.DXF"),
                                  "--size", "M", "--out", str(tmp_path / "out")])
