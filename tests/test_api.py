@@ -8,7 +8,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.main import create_app
-from app.settings import Settings
+from app.core.config import Settings
 from tests.samples import SAMPLE_BODY, SAMPLE_SKIRT, write_anim_zip, write_arms_lowered_scan
 
 
@@ -146,7 +146,7 @@ def test_upload_says_what_the_loader_and_the_measurements_found(idle, tmp_path):
 
 
 def test_upload_size_cap(tmp_path):
-    with TestClient(create_app(_settings(tmp_path, max_upload_bytes=1000), start_workers=False)) as c:
+    with TestClient(create_app(_settings(tmp_path, max_upload_mb=1000 / 2 ** 20), start_workers=False)) as c:
         h = token(c)
         r = c.post("/api/bodies", files={"file": ("big.obj", b"v 0 0 0\n" * 500)}, headers=h)
         assert r.status_code == 413 and "MB" in r.json()["error"]
@@ -391,7 +391,7 @@ def test_cancel_and_delete_running(tmp_path):
 def test_worker_warm_up_loads_the_engine_and_never_raises(monkeypatch, capsys):
     """A fresh worker, while no try-on waits, dresses a coarse skirt once (kernels, body, GL
     context); a failure there is reported and printed, never raised (the worker goes on)."""
-    from app.worker import warm_up
+    from app.queue.worker import warm_up
 
     r = warm_up()
     assert r["ok"] is True and r["seconds"] > 0

@@ -5,6 +5,7 @@ A try-on's request (JSON, resolved by the API): body {"spec": "default:female,..
 {"file": path} or {"animation": path, "fps": rate} (dressed on its first frame; with motion
 "walk" it moves as uploaded); garment {"name": catalogue name} or {"file": pattern path}; size, fabric,
 motion ("none" or "walk"), seconds, resolution_cm. Results go to DATA/jobs/<id>/.
+The worker gets the service's settings from its supervisor and hands them to the engine.
 """
 
 from __future__ import annotations
@@ -16,23 +17,25 @@ import time
 import traceback
 from pathlib import Path
 
-from app.db import DB
+from app import crud
+from app.core.config import Settings
+from app.core.db import DB
+from app.queue.results import job_dir
 
 
 class Cancelled(Exception):
     pass
 
 
-def job_dir(data_dir: Path, jid: str) -> Path:
-    return Path(data_dir) / "jobs" / jid
+def worker_main(settings: Settings, poll: float = 0.2) -> None:
+    from engine.settings import use
 
-
-def worker_main(db_path: str, data_dir: str, poll: float = 0.2) -> None:
-    db = DB(Path(db_path))
+    use(settings)
+    db = DB(settings.db)
     pid = os.getpid()
     warm = True  # warm up once, while no try-on waits (one that does is not kept waiting for it)
     while True:
-        job = db.claim(pid)
+        job = crud.claim(db, pid)
         if job is None:
             if warm:
                 warm = False
@@ -41,7 +44,7 @@ def worker_main(db_path: str, data_dir: str, poll: float = 0.2) -> None:
             time.sleep(poll)
             continue
         warm = False
-        run_job(db, job, Path(data_dir))
+        run_job(db, job, settings.data_dir)
 
 
 def warm_up() -> dict:
@@ -73,8 +76,6 @@ def warm_up() -> dict:
 
 
 def run_job(db: DB, job: dict, data_dir: Path) -> None:
-    from engine.errors import TryonError
-
     jid = job["id"]
     out = job_dir(data_dir, jid)
     last = [0.0]
@@ -84,34 +85,35 @@ def run_job(db: DB, job: dict, data_dir: Path) -> None:
         if now - last[0] < 0.3:
             return
         last[0] = now
-        row = db.one("SELECT cancel FROM jobs WHERE id=?", jid)
-        if row is None or row["cancel"]:
+        if crud.cancel_wanted(db, jid):
             raise Cancelled()
-        db.run("UPDATE jobs SET stage=?, progress=?, message=? WHERE id=?", stage, float(fraction), message, jid)
+        crud.set_progress(db, jid, stage, fraction, message)
 
     def live(port: int) -> None:
-        db.run("UPDATE jobs SET viewer_port=? WHERE id=?", port, jid)
+        crud.set_viewer_port(db, jid, port)
 
     try:
         report = _run(json.loads(job["request"]), out, progress, live)
-    except Cancelled:
+    except Exception as e:
         shutil.rmtree(out, ignore_errors=True)
-        db.finish(jid, "cancelled", "cancelled on request")
+        crud.finish(db, jid, *_failure(e))
         return
-    except TryonError as e:
-        shutil.rmtree(out, ignore_errors=True)
-        db.finish(jid, "failed", str(e))
-        return
-    except Exception as e:  # a bug: the job fails with the reason, the worker goes on
-        shutil.rmtree(out, ignore_errors=True)
-        db.finish(jid, "failed", f"internal error ({type(e).__name__}: {e})")
-        traceback.print_exc()
-        return
-    if db.one("SELECT id FROM jobs WHERE id=?", jid) is None:  # deleted while it ran
+    if crud.get(db, "jobs", jid) is None:  # deleted while it ran
         shutil.rmtree(out, ignore_errors=True)
         return
-    db.run("UPDATE jobs SET progress=1, stage='done', message='' WHERE id=?", jid)
-    db.finish(jid, "done", None, report)
+    crud.finish(db, jid, "done", None, report)
+
+
+def _failure(e: Exception) -> tuple[str, str]:
+    """(status, reason) of a try-on that stopped with `e`."""
+    from engine.errors import TryonError
+
+    if isinstance(e, Cancelled):
+        return "cancelled", "cancelled on request"
+    if isinstance(e, TryonError):
+        return "failed", str(e)
+    traceback.print_exc()  # a bug: the job fails with the reason, the worker goes on
+    return "failed", f"internal error ({type(e).__name__}: {e})"
 
 
 def _run(req: dict, out: Path, progress, live=None) -> dict:
@@ -130,7 +132,7 @@ def _run(req: dict, out: Path, progress, live=None) -> dict:
     g = req["garment"]
     fabric = req.get("fabric", "cotton")
     walking = req.get("motion", "none") == "walk"
-    from app.viewer import LiveView
+    from app.queue.live_view import LiveView
 
     view = LiveView(body.vertices, body.faces)
     try:

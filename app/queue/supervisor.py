@@ -14,10 +14,10 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import threading
-import time
 
-from app.db import DB
-from app.settings import Settings
+from app import crud
+from app.core.config import Settings
+from app.core.db import DB
 
 
 class JobManager:
@@ -30,28 +30,25 @@ class JobManager:
         self._lock = threading.Lock()
 
     def recover(self) -> None:
-        n = self.settings.attempts
-        self.db.run("UPDATE jobs SET status='queued', worker_pid=NULL, stage='', progress=0, "
-                    "message='started again: the service stopped while it ran' "
-                    "WHERE status='running' AND attempts < ? AND cancel = 0", n)
-        self.db.run("UPDATE jobs SET status='failed', worker_pid=NULL, finished=?, "
-                    "error='the service stopped while this try-on ran, ' || attempts || ' time(s); not retried again' "
-                    "WHERE status='running'", time.time())
+        crud.requeue_interrupted(self.db, self.settings.attempts)
+
+    def worker_settings(self) -> Settings:
+        """The settings handed to each worker: a try-on per core leaves no idle core for the
+        solvers' query helper threads, so they are off then unless TRYON_QUERY_HELPER says."""
+        s = self.settings
+        if s.workers >= (os.cpu_count() or 1) and "query_helper" not in s.model_fields_set:
+            return s.model_copy(update={"query_helper": False})
+        return s
 
     def _spawn(self):
-        from app.worker import worker_main
+        from app.queue.worker import worker_main
 
-        p = self.ctx.Process(target=worker_main, args=(str(self.settings.db), str(self.settings.data_dir)),
-                             daemon=True, name="tryon-worker")
+        p = self.ctx.Process(target=worker_main, args=(self.worker_settings(),), daemon=True, name="tryon-worker")
         p.start()
         return p
 
     def start(self) -> None:
         self.recover()
-        if self.settings.workers >= (os.cpu_count() or 1):
-            # a try-on per core leaves no idle core for the solvers' query helper threads
-            # (engine.collide.server.helper_default); the workers inherit this
-            os.environ.setdefault("TRYON_QUERY_HELPER", "0")
         with self._lock:
             self.procs = [self._spawn() for _ in range(self.settings.workers)]
         self._thread = threading.Thread(target=self._monitor, daemon=True, name="tryon-monitor")
@@ -63,10 +60,9 @@ class JobManager:
                 for i, p in enumerate(self.procs):
                     if p.is_alive() or self._stop.is_set():
                         continue
-                    self.db.run("UPDATE jobs SET status='failed', finished=?, worker_pid=NULL, "
-                                "error=? WHERE status='running' AND worker_pid=?", time.time(),
-                                f"the worker process running this try-on stopped unexpectedly (exit code "
-                                f"{p.exitcode}); other try-ons are not affected, try again", p.pid)
+                    crud.fail_worker_jobs(self.db, p.pid, f"the worker process running this try-on stopped "
+                                          f"unexpectedly (exit code {p.exitcode}); other try-ons are not "
+                                          "affected, try again")
                     self.procs[i] = self._spawn()
 
     def worker_pids(self) -> list[int]:

@@ -1,0 +1,49 @@
+"""Try-ons: queue one, follow it, cancel or delete it, download its results."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, HTTPException
+from fastapi.responses import FileResponse
+
+from app import crud
+from app.api.deps import DBDep, Owner, OwnedJob, SettingsDep
+from app.models import TryOnIn, job_public
+from app.queue.results import RESULT_FILES, job_dir
+from app.services import tryons
+
+router = APIRouter(prefix="/api/tryons", tags=["tryons"])
+
+
+@router.post("", status_code=202)
+def create_tryon(req: TryOnIn, who: Owner, s: SettingsDep, db: DBDep):
+    return job_public(tryons.submit(req, s, db, who), s.data_dir)
+
+
+@router.get("")
+def list_tryons(who: Owner, s: SettingsDep, db: DBDep):
+    return [job_public(r, s.data_dir) for r in crud.list_owned(db, "jobs", who)]
+
+
+@router.get("/{jid}")
+def get_tryon(row: OwnedJob, s: SettingsDep):
+    return job_public(row, s.data_dir)
+
+
+@router.post("/{jid}/cancel", status_code=202)
+def cancel_tryon(row: OwnedJob, s: SettingsDep, db: DBDep):
+    return job_public(tryons.cancel(row, db), s.data_dir)
+
+
+@router.delete("/{jid}", status_code=204)
+def delete_tryon(row: OwnedJob, s: SettingsDep, db: DBDep):
+    tryons.delete(row, s, db)
+
+
+@router.get("/{jid}/files/{name}")
+def result_file(row: OwnedJob, name: str, s: SettingsDep):
+    if name not in RESULT_FILES:
+        raise HTTPException(404, f"no result '{name}': results are {', '.join(RESULT_FILES)}")
+    p = job_dir(s.data_dir, row["id"]) / name
+    if not p.is_file():
+        raise HTTPException(404, f"'{name}' is not there (yet): the try-on is not done, or did not make it")
+    return FileResponse(p)

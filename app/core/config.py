@@ -1,0 +1,50 @@
+"""The service's settings, in one place: every TRYON_* variable (the engine's too), read once.
+
+    TRYON_DATA            data directory: the job database, uploads, results   (./data)
+    TRYON_DB              the SQLite file of the jobs                           (DATA/jobs.sqlite)
+    TRYON_MAX_UPLOAD_MB   largest accepted upload                               (50)
+    TRYON_QUEUE_MAX       try-ons waiting at most; more get 429                 (20)
+    TRYON_WORKERS         worker processes (each runs one try-on at a time)     (1)
+    TRYON_ATTEMPTS        how often a try-on cut off by a restart is started    (2)
+    TRYON_TOKENS          comma-separated API tokens accepted besides issued ones
+    and the engine's (engine/settings.py): TRYON_GL, TRYON_CACHE, TRYON_MAX_TRIANGLES,
+    TRYON_QUERY_HELPER, TRYON_DEBUG.
+
+`create_app` reads them (or takes a Settings) and passes them down: to the engine in this process
+(engine.settings.use) and to each worker process it starts.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+from pydantic import Field, field_validator
+from pydantic_settings import NoDecode, SettingsConfigDict
+
+from engine.settings import EngineSettings
+
+
+class Settings(EngineSettings):
+    model_config = SettingsConfigDict(populate_by_name=True)
+
+    data_dir: Path = Field(Path("data"), validation_alias="tryon_data")
+    db_path: Path | None = Field(None, validation_alias="tryon_db")
+    max_upload_mb: float = Field(50.0, gt=0)
+    queue_max: int = Field(20, ge=1)
+    workers: int = Field(1, ge=1, le=16)
+    attempts: int = Field(2, ge=1, le=10)
+    tokens: Annotated[list[str], NoDecode] = []
+
+    @field_validator("tokens", mode="before")
+    @classmethod
+    def _comma_separated(cls, v):
+        return [t.strip() for t in v.split(",") if t.strip()] if isinstance(v, str) else v
+
+    @property
+    def db(self) -> Path:
+        return self.db_path or self.data_dir / "jobs.sqlite"
+
+    @property
+    def max_upload_bytes(self) -> int:
+        return int(self.max_upload_mb * 2 ** 20)
