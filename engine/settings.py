@@ -81,6 +81,7 @@ def describe(error) -> str:
     """A one-line message for a pydantic ValidationError raised while reading settings."""
     parts = []
     for e in error.errors():
-        name = "TRYON_" + "_".join(str(x) for x in e.get("loc", ())).upper()
+        name = "_".join(str(x) for x in e.get("loc", ())).upper()
+        name = name if name.startswith("TRYON_") else "TRYON_" + name  # aliased fields carry it
         parts.append(f"{name}={e.get('input')!r}: {e.get('msg')}")
     return "bad setting: " + "; ".join(parts) + " (fix or unset the environment variable)"

@@ -403,3 +403,31 @@ def test_worker_warm_up_loads_the_engine_and_never_raises(monkeypatch, capsys):
     r = warm_up()
     assert r["ok"] is False
     assert "no GL here" in capsys.readouterr().err
+
+
+def test_settings_from_the_environment(monkeypatch, tmp_path):
+    """Every TRYON_* variable lands in one Settings (the engine's too); the workers get them
+    handed down, with the query helpers off when there is a worker per core (unless set)."""
+    import os
+
+    from app.core.db import DB
+    from app.queue.supervisor import JobManager
+    from engine.errors import InputError
+    from engine.settings import read
+
+    cores = os.cpu_count() or 1
+    env = {"TRYON_DATA": str(tmp_path / "d"), "TRYON_TOKENS": "a, b,", "TRYON_MAX_UPLOAD_MB": "0.5",
+           "TRYON_WORKERS": str(min(cores, 16)), "TRYON_MAX_TRIANGLES": "3e5", "TRYON_GL": "OSMesa"}
+    for k, v in env.items():
+        monkeypatch.setenv(k, v)
+    s = read(Settings)
+    assert s.data_dir == tmp_path / "d" and s.db == tmp_path / "d" / "jobs.sqlite" and s.tokens == ["a", "b"]
+    assert s.max_upload_bytes == 2 ** 19 and s.max_triangles == 300_000 and s.gl == "osmesa"
+    manager = JobManager(s, DB(s.db))
+    assert manager.worker_settings().query_helper is (cores > 16)
+    monkeypatch.setenv("TRYON_QUERY_HELPER", "1")
+    assert JobManager(read(Settings), manager.db).worker_settings().query_helper is True
+    for name, value in (("TRYON_QUEUE_MAX", "lots"), ("TRYON_WORKERS", "99")):
+        monkeypatch.setenv(name, value)
+        with pytest.raises(InputError, match=f"{name}='{value}'"):
+            read(Settings)
