@@ -73,13 +73,12 @@ async def upload_body(file: UploadFile, fps: float, settings: Settings, db: DB, 
 
 def default_body(spec: DefaultBodyIn, db: DB, who: str) -> dict:
     """A default body's row, its parameters checked (422 with the range when out of it)."""
-    from engine.body.default import _check_value
+    from engine.body.default import check_params
     from engine.errors import InputError
 
     params = {k: v for k, v in spec.model_dump().items() if k != "preset" and v is not None}
     try:
-        for k, v in params.items():
-            _check_value(k, v)
+        check_params(spec.preset, params)
     except InputError as e:
         raise HTTPException(422, str(e)) from None
     text = "default:" + ",".join([spec.preset] + [f"{k}={v:g}" for k, v in params.items()])

@@ -24,6 +24,7 @@ def _body(req: TryOnIn, db: DB, who: str) -> dict:
         if not req.body.startswith("default:"):
             raise HTTPException(422, "body: only default bodies by name (default:female, default:male); "
                                      "upload a scan with POST /api/bodies and give its body_id")
+        _check_default(req.body)
         return {"spec": req.body}
     row = owned(db, "bodies", req.body_id, who)
     if row["kind"] == "default":
@@ -31,6 +32,18 @@ def _body(req: TryOnIn, db: DB, who: str) -> dict:
     if row["kind"] == "animation":
         return {"animation": row["spec"], "fps": json.loads(row["info"])["fps"]}
     return {"file": row["spec"]}
+
+
+def _check_default(spec: str) -> None:
+    """A default body's spec checked now (preset, names, ranges), not first in the worker."""
+    from engine.body import parse_default_spec
+    from engine.body.default import check_params
+    from engine.errors import InputError
+
+    try:
+        check_params(*parse_default_spec(spec))
+    except InputError as e:
+        raise HTTPException(422, f"body: {e}") from None
 
 
 def _garment(req: TryOnIn, db: DB, who: str) -> dict:

@@ -26,7 +26,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from engine.body.types import Body
-from engine.errors import InputError
+from engine.errors import InputError, parser
 from engine.settings import current
 
 SUPPORTED = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
@@ -36,6 +36,7 @@ HUMAN_HEIGHT = (0.5, 2.5)  # m; the unit scales give non-overlapping raw ranges
 TINY_PIECE = 0.01  # drop components under this fraction of the total surface area
 
 
+@parser("a mesh")
 def load_body_file(path, up: str | None = None, front: str | None = None,
                    max_triangles: int | None = None, fill_holes: bool = True) -> Body:
     """Read a mesh file and return a normalised Body (see module doc).
