@@ -13,29 +13,19 @@ from __future__ import annotations
 from contextlib import asynccontextmanager
 from pathlib import Path
 
-from fastapi import FastAPI, HTTPException, Request
-from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse, RedirectResponse
+from fastapi import FastAPI
+from fastapi.responses import RedirectResponse
 from fastapi.staticfiles import StaticFiles
 
+from app.api import errors
 from app.api.routes import bodies, garments, tokens, tryons, viewer
 from app.core.config import Settings
 from app.core.db import DB
+from app.core.limits import JSON_LIMIT, BodyLimit
 from app.queue.supervisor import JobManager
+from app.services.fence import Gate
 
 WEB = Path(__file__).resolve().parents[1] / "web"
-
-
-async def http_error(request: Request, exc: HTTPException):
-    return JSONResponse({"error": exc.detail}, status_code=exc.status_code, headers=exc.headers)
-
-
-async def validation_error(request: Request, exc: RequestValidationError):
-    parts = []
-    for e in exc.errors():
-        where = ".".join(str(x) for x in e.get("loc", ()) if x != "body")
-        parts.append(f"{where}: {e.get('msg')}" if where else str(e.get("msg")))
-    return JSONResponse({"error": "; ".join(parts)}, status_code=422)
 
 
 def create_app(settings: Settings | None = None, start_workers: bool = True) -> FastAPI:
@@ -57,8 +47,9 @@ def create_app(settings: Settings | None = None, start_workers: bool = True) -> 
     app = FastAPI(title="tryon", description="Virtual try-on: dress a body in a garment, walk it.",
                   lifespan=lifespan)
     app.state.settings, app.state.db, app.state.jobs = s, db, manager
-    app.add_exception_handler(HTTPException, http_error)
-    app.add_exception_handler(RequestValidationError, validation_error)
+    app.state.gate = Gate(s.parse_slots, s.uploads_per_token)
+    errors.install(app)
+    app.add_middleware(BodyLimit, upload_limit=2 * s.max_upload_bytes + JSON_LIMIT)  # a DXF + its assembly
     for r in (tokens, bodies, garments, tryons, viewer):
         app.include_router(r.router)
     app.add_api_route("/", lambda: RedirectResponse("/web/index.html"), include_in_schema=False)

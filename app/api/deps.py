@@ -10,6 +10,7 @@ from starlette.requests import HTTPConnection
 from app import crud
 from app.core.config import Settings
 from app.core.db import DB
+from app.services.uploads import Upload
 
 
 def get_settings(conn: HTTPConnection) -> Settings:
@@ -47,6 +48,13 @@ def current_owner(settings: SettingsDep, db: DBDep, authorization: str | None = 
 
 
 Owner = Annotated[str, Depends(current_owner)]
+
+
+def upload_context(settings: SettingsDep, db: DBDep, who: Owner, conn: HTTPConnection) -> Upload:
+    return Upload(settings, db, who, conn.app.state.gate)
+
+
+UploadDep = Annotated[Upload, Depends(upload_context)]
 
 NAMES = {"bodies": "body", "garments": "garment", "jobs": "job"}
 

@@ -7,6 +7,10 @@
     TRYON_WORKERS         worker processes (each runs one try-on at a time)     (1)
     TRYON_ATTEMPTS        how often a try-on cut off by a restart is started    (2)
     TRYON_TOKENS          comma-separated API tokens accepted besides issued ones
+    TRYON_PARSE_SECONDS   time an upload's read may take                        (60)
+    TRYON_PARSE_MB        memory an upload's read may take                      (2048)
+    TRYON_PARSE_SLOTS     uploads read at once; more wait                       (2)
+    TRYON_UPLOADS_PER_TOKEN  one token's uploads being read or waiting; more 429 (2)
     and the engine's (engine/settings.py): TRYON_GL, TRYON_CACHE, TRYON_MAX_TRIANGLES,
     TRYON_QUERY_HELPER, TRYON_DEBUG.
 
@@ -35,6 +39,10 @@ class Settings(EngineSettings):
     workers: int = Field(1, ge=1, le=16)
     attempts: int = Field(2, ge=1, le=10)
     tokens: Annotated[list[str], NoDecode] = []
+    parse_seconds: float = Field(60.0, gt=0, le=3600)   # one upload's read, wall and CPU time
+    parse_mb: int = Field(2048, ge=256)                  # memory one upload's read may take
+    parse_slots: int = Field(2, ge=1, le=64)             # uploads read at once (more wait)
+    uploads_per_token: int = Field(2, ge=1)              # one token's uploads being read or waiting
 
     @field_validator("tokens", mode="before")
     @classmethod
@@ -48,3 +56,9 @@ class Settings(EngineSettings):
     @property
     def max_upload_bytes(self) -> int:
         return int(self.max_upload_mb * 2 ** 20)
+
+    @property
+    def parse_limits(self):
+        from app.services.fence import Limits
+
+        return Limits(seconds=self.parse_seconds, memory_mb=self.parse_mb)

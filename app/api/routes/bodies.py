@@ -5,7 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter, File, Form, UploadFile
 
 from app import crud
-from app.api.deps import DBDep, Owner, OwnedBody, SettingsDep
+from app.api.deps import DBDep, Owner, OwnedBody, UploadDep
 from app.models import DefaultBodyIn, body_public
 from app.services import bodies
 
@@ -13,11 +13,11 @@ router = APIRouter(prefix="/api/bodies", tags=["bodies"])
 
 
 @router.post("", status_code=201)
-async def upload_body(who: Owner, s: SettingsDep, db: DBDep, file: UploadFile = File(...), fps: float = Form(30.0)):
+async def upload_body(up: UploadDep, file: UploadFile = File(...), fps: float = Form(30.0)):
     """A scan (a mesh file), or an animated body: a .zip of OBJ frames (one topology) played
     at `fps`, or a .glb with a morph-target or skinned animation sampled at `fps`. An
     animated body is dressed on its first frame and, with motion "walk", moves as uploaded."""
-    return body_public(await bodies.upload_body(file, fps, s, db, who))
+    return body_public(await bodies.upload_body(file, fps, up))
 
 
 @router.post("/default", status_code=201)

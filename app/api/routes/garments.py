@@ -5,7 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter, File, Form, UploadFile
 
 from app import crud
-from app.api.deps import DBDep, Owner, OwnedGarment, SettingsDep
+from app.api.deps import DBDep, Owner, OwnedGarment, UploadDep
 from app.models import garment_public
 from app.services import garments
 
@@ -18,14 +18,14 @@ def list_garments(who: Owner, db: DBDep):
 
 
 @router.post("", status_code=201)
-async def upload_garment(who: Owner, s: SettingsDep, db: DBDep,
+async def upload_garment(up: UploadDep,
                          file: UploadFile = File(..., description="a GarmentCode JSON specification, or a DXF "
                                                  "of the pattern pieces (ASTM D6673 / AAMA, or closed polylines)"),
                          assembly: UploadFile | None = File(None, description="with a DXF: its assembly JSON "
                                                              "(stitches by panel and edge number, placement; "
                                                              "see `tryon pattern import`)"),
                          units: str | None = Form(None, description="with a DXF that does not say: mm, cm, m or in")):
-    return garment_public(await garments.upload_pattern(file, assembly, units, s, db, who))
+    return garment_public(await garments.upload_pattern(file, assembly, units, up))
 
 
 @router.get("/{gid}")
