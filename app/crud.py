@@ -67,35 +67,58 @@ def create_garment(db: DB, gid: str, owner: str, file: str, name: str, info: dic
 
 
 # --- jobs -------------------------------------------------------------------------------------
-def enqueue(db: DB, owner: str, request: dict, queue_max: int) -> str | None:
-    """A new queued job, or None when `queue_max` jobs are already waiting (atomic)."""
+def enqueue(db: DB, owner: str, request: dict, queue_max: int, per_owner: int) -> tuple[str | None, str]:
+    """(id, "") of a new queued job, or (None, "all") when `queue_max` jobs are already waiting,
+    (None, "owner") when `owner` has `per_owner` waiting or running (atomic)."""
     jid = new_id()
     with db.transaction() as c:
         if c.execute("SELECT COUNT(*) FROM jobs WHERE status='queued'").fetchone()[0] >= queue_max:
-            return None
+            return None, "all"
+        if c.execute("SELECT COUNT(*) FROM jobs WHERE owner=? AND status IN ('queued', 'running')",
+                     (owner,)).fetchone()[0] >= per_owner:
+            return None, "owner"
         c.execute("INSERT INTO jobs (id, owner, request, status, created) VALUES (?,?,?,?,?)",
                   (jid, owner, json.dumps(request), "queued", time.time()))
-    return jid
+    return jid, ""
 
 
-def claim(db: DB, pid: int) -> dict | None:
-    """The oldest queued job, marked running by worker `pid` (atomic)."""
+def claim(db: DB, pid: int, lease: float) -> dict | None:
+    """The oldest queued job, marked running by worker `pid` with a new attempt number (its fence)
+    and a lease of `lease` seconds that the worker's heartbeats extend (atomic)."""
+    now = time.time()
     with db.transaction() as c:
         r = c.execute("SELECT * FROM jobs WHERE status='queued' ORDER BY created LIMIT 1").fetchone()
         if r is None:
             return None
-        c.execute("UPDATE jobs SET status='running', attempts=attempts+1, worker_pid=?, started=?, "
-                  "stage='starting', progress=0 WHERE id=?", (pid, time.time(), r["id"]))
-        return dict(r)
+        c.execute("UPDATE jobs SET status='running', attempts=attempts+1, worker_pid=?, started=?, lease_until=?, "
+                  "stage='starting', progress=0 WHERE id=?", (pid, now, now + lease, r["id"]))
+        return dict(c.execute("SELECT * FROM jobs WHERE id=?", (r["id"],)).fetchone())
 
 
-def finish(db: DB, jid: str, status: str, error: str | None = None, report: dict | None = None) -> None:
-    """A running job ends: done (with its report), failed or cancelled (with the reason)."""
+FENCE = "id=? AND attempts=? AND status='running'"  # only the job's current attempt may change it
+
+
+def heartbeat(db: DB, jid: str, attempt: int, lease: float) -> bool:
+    """Extend the lease; False when this attempt no longer holds the job (requeued, cancelled, deleted)."""
+    return db.run(f"UPDATE jobs SET lease_until=? WHERE {FENCE}", time.time() + lease, jid, attempt) == 1
+
+
+def finish(db: DB, jid: str, attempt: int, status: str, error: str | None = None,
+           report: dict | None = None, result: str | None = None) -> bool:
+    """Attempt `attempt` of a running job ends: done (its report and published result folder),
+    failed or cancelled (the reason). False when that attempt no longer holds the job."""
     done = status == "done"
-    db.run("UPDATE jobs SET status=?, error=?, report=?, finished=?, worker_pid=NULL, viewer_port=NULL, "
-           "progress=CASE WHEN ? THEN 1 ELSE progress END, stage=CASE WHEN ? THEN 'done' ELSE stage END, "
-           "message=CASE WHEN ? THEN '' ELSE message END WHERE id=? AND status='running'",
-           status, error, json.dumps(report) if report is not None else None, time.time(), done, done, done, jid)
+    return db.run("UPDATE jobs SET status=?, error=?, report=?, result=?, finished=?, worker_pid=NULL, "
+                  "viewer_port=NULL, lease_until=NULL, progress=CASE WHEN ? THEN 1 ELSE progress END, "
+                  "stage=CASE WHEN ? THEN 'done' ELSE stage END, message=CASE WHEN ? THEN '' ELSE message END "
+                  f"WHERE {FENCE}", status, error, json.dumps(report) if report is not None else None, result,
+                  time.time(), done, done, done, jid, attempt) == 1
+
+
+def requeue(db: DB, jid: str, attempt: int, message: str) -> bool:
+    """A worker stopping gracefully gives its job back (not counted against TRYON_ATTEMPTS)."""
+    return db.run("UPDATE jobs SET status='queued', worker_pid=NULL, lease_until=NULL, viewer_port=NULL, "
+                  f"stage='', progress=0, message=?, graceful=graceful+1 WHERE {FENCE}", message, jid, attempt) == 1
 
 
 def cancel_wanted(db: DB, jid: str) -> bool:
@@ -124,18 +147,29 @@ def delete_job(db: DB, jid: str) -> None:
     delete(db, "jobs", jid)
 
 
-def requeue_interrupted(db: DB, attempts: int) -> None:
-    """At start: jobs left running by a previous run of the service are queued again, or failed
-    once they have been started `attempts` times."""
-    db.run("UPDATE jobs SET status='queued', worker_pid=NULL, stage='', progress=0, "
-           "message='started again: the service stopped while it ran' "
-           "WHERE status='running' AND attempts < ? AND cancel = 0", attempts)
-    db.run("UPDATE jobs SET status='failed', worker_pid=NULL, finished=?, "
-           "error='the service stopped while this try-on ran, ' || attempts || ' time(s); not retried again' "
-           "WHERE status='running'", time.time())
+def requeue_stale(db: DB, attempts: int, expired_only: bool = True) -> list[str]:
+    """Running jobs whose runner is gone -- their lease ran out, or (at start, expired_only False)
+    all of them -- are queued again, or failed once started `attempts` times (graceful stops
+    not counted). Their ids."""
+    now = time.time()
+    cond = "status='running'" + (" AND lease_until < ?" if expired_only else "")
+    args = (now,) if expired_only else ()
+    with db.transaction() as c:
+        ids = [r[0] for r in c.execute(f"SELECT id FROM jobs WHERE {cond}", args)]
+        c.execute("UPDATE jobs SET status='queued', worker_pid=NULL, lease_until=NULL, viewer_port=NULL, stage='', "
+                  "progress=0, message='started again: the service or its worker stopped while it ran' "
+                  f"WHERE {cond} AND attempts - graceful < ? AND cancel = 0", (*args, attempts))
+        c.execute("UPDATE jobs SET status=CASE WHEN cancel THEN 'cancelled' ELSE 'failed' END, worker_pid=NULL, "
+                  "lease_until=NULL, viewer_port=NULL, finished=?, error=CASE WHEN cancel THEN 'cancelled on request' "
+                  "ELSE 'the service stopped while this try-on ran, ' || (attempts - graceful) || ' time(s); not "
+                  f"retried again' END WHERE {cond}", (now, *args))
+    return ids
 
 
-def fail_worker_jobs(db: DB, pid: int, error: str) -> None:
-    """The job a dead worker process was running fails with `error`."""
-    db.run("UPDATE jobs SET status='failed', finished=?, worker_pid=NULL, error=? "
-           "WHERE status='running' AND worker_pid=?", time.time(), error, pid)
+def fail_worker_jobs(db: DB, pid: int, error: str) -> list[str]:
+    """The job a dead worker process was running fails with `error`; its id(s)."""
+    with db.transaction() as c:
+        ids = [r[0] for r in c.execute("SELECT id FROM jobs WHERE status='running' AND worker_pid=?", (pid,))]
+        c.execute("UPDATE jobs SET status='failed', finished=?, worker_pid=NULL, lease_until=NULL, viewer_port=NULL, "
+                  "error=? WHERE status='running' AND worker_pid=?", (time.time(), error, pid))
+    return ids

@@ -8,7 +8,7 @@ from typing import Literal
 
 from pydantic import BaseModel, Field
 
-from app.queue.results import RESULT_FILES, job_dir
+from app.queue.results import RESULT_FILES, result_dir
 
 
 class DefaultBodyIn(BaseModel):
@@ -45,11 +45,11 @@ def job_public(row: dict, data_dir: Path) -> dict:
     """A try-on as the API shows it: its state, request, and once done its report, files and viewer."""
     out = {k: row[k] for k in ("id", "status", "progress", "stage", "message", "error", "attempts")}
     out["request"] = json.loads(row["request"])
-    d = job_dir(data_dir, row["id"])
+    d = result_dir(data_dir, row)
     if row["status"] == "done":
         out["report"] = json.loads(row["report"] or "{}")
-        out["files"] = {n: f"/api/tryons/{row['id']}/files/{n}" for n in RESULT_FILES if (d / n).exists()}
+        out["files"] = {n: f"/api/tryons/{row['id']}/files/{n}" for n in RESULT_FILES if d and (d / n).exists()}
     live = row["status"] == "running" and row["viewer_port"]
-    recorded = row["status"] == "done" and (d / "recording.viser").exists()
+    recorded = d is not None and (d / "recording.viser").exists()
     out["viewer"] = f"/viewer/{row['id']}/" if live or recorded else None
     return out

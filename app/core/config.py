@@ -4,6 +4,7 @@
     TRYON_DB              the SQLite file of the jobs                           (DATA/jobs.sqlite)
     TRYON_MAX_UPLOAD_MB   largest accepted upload                               (50)
     TRYON_QUEUE_MAX       try-ons waiting at most; more get 429                 (20)
+    TRYON_QUEUE_PER_TOKEN one token's try-ons waiting or running; more get 429  (5)
     TRYON_WORKERS         worker processes (each runs one try-on at a time)     (1)
     TRYON_ATTEMPTS        how often a try-on cut off by a restart is started    (2)
     TRYON_TOKENS          comma-separated API tokens accepted besides issued ones
@@ -36,6 +37,7 @@ class Settings(EngineSettings):
     db_path: Path | None = Field(None, validation_alias="tryon_db")
     max_upload_mb: float = Field(50.0, gt=0)
     queue_max: int = Field(20, ge=1)
+    queue_per_token: int = Field(5, ge=1)                # one token's try-ons waiting or running
     workers: int = Field(1, ge=1, le=16)
     attempts: int = Field(2, ge=1, le=10)
     tokens: Annotated[list[str], NoDecode] = []

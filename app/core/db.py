@@ -17,9 +17,13 @@ CREATE TABLE IF NOT EXISTS garments (id TEXT PRIMARY KEY, owner TEXT, file TEXT,
 CREATE TABLE IF NOT EXISTS jobs (id TEXT PRIMARY KEY, owner TEXT, request TEXT, status TEXT,
     progress REAL DEFAULT 0, stage TEXT DEFAULT '', message TEXT DEFAULT '', error TEXT,
     attempts INTEGER DEFAULT 0, worker_pid INTEGER, cancel INTEGER DEFAULT 0,
-    created REAL, started REAL, finished REAL, report TEXT, viewer_port INTEGER);
+    created REAL, started REAL, finished REAL, report TEXT, viewer_port INTEGER,
+    lease_until REAL, graceful INTEGER DEFAULT 0, result TEXT);
 CREATE INDEX IF NOT EXISTS jobs_status ON jobs(status, created);
+CREATE INDEX IF NOT EXISTS jobs_owner ON jobs(owner, status);
 """
+# columns added since the first schema: a database made before gets them at start
+ADDED = {"jobs": ("lease_until REAL", "graceful INTEGER DEFAULT 0", "result TEXT")}
 
 
 class DB:
@@ -29,6 +33,11 @@ class DB:
         with self.conn() as c:
             c.execute("PRAGMA journal_mode=WAL")
             c.executescript(SCHEMA)
+            for table, columns in ADDED.items():
+                have = {r["name"] for r in c.execute(f"PRAGMA table_info({table})")}
+                for col in columns:
+                    if col.split()[0] not in have:
+                        c.execute(f"ALTER TABLE {table} ADD COLUMN {col}")
 
     @contextmanager
     def conn(self):

@@ -4,15 +4,21 @@ their results and status. Started with multiprocessing's spawn (never fork after
 A try-on's request (JSON, resolved by the API): body {"spec": "default:female,..."},
 {"file": path} or {"animation": path, "fps": rate} (dressed on its first frame; with motion
 "walk" it moves as uploaded); garment {"name": catalogue name} or {"file": pattern path}; size, fabric,
-motion ("none" or "walk"), seconds, resolution_cm. Results go to DATA/jobs/<id>/.
-The worker gets the service's settings from its supervisor and hands them to the engine.
+motion ("none" or "walk"), seconds, resolution_cm. Results go to DATA/jobs/<id>/attempt-<n>/
+(app/queue/results.py). The worker gets the service's settings from its supervisor and hands them
+to the engine; it holds a job by a lease that its heartbeats extend, and dies with its supervisor.
 """
 
 from __future__ import annotations
 
+import ctypes
+import errno
 import json
 import os
 import shutil
+import signal
+import sqlite3
+import threading
 import time
 import traceback
 from pathlib import Path
@@ -20,31 +26,87 @@ from pathlib import Path
 from app import crud
 from app.core.config import Settings
 from app.core.db import DB
-from app.queue.results import job_dir
+from app.queue.results import attempt_dir
+
+
+LEASE = 30.0  # s a claimed job stays this worker's without a heartbeat
+BEAT = 5.0    # s between heartbeats
+STOP = threading.Event()  # set by SIGTERM: finish the step, give the job back, exit
 
 
 class Cancelled(Exception):
     pass
 
 
-def worker_main(settings: Settings, poll: float = 0.2) -> None:
+class Stopped(Exception):
+    """The worker is stopping (SIGTERM): its job is given back to the queue."""
+
+
+class LeaseLost(Exception):
+    """The job is no longer this attempt's (requeued after a lost lease, or deleted)."""
+
+
+def worker_main(settings: Settings, parent: int, poll: float = 0.2) -> None:
     from engine.settings import use
 
+    _die_with(parent)
+    signal.signal(signal.SIGTERM, lambda *_: STOP.set())
     use(settings)
     db = DB(settings.db)
     pid = os.getpid()
     warm = True  # warm up once, while no try-on waits (one that does is not kept waiting for it)
-    while True:
-        job = crud.claim(db, pid)
-        if job is None:
-            if warm:
-                warm = False
-                warm_up()
+    while not STOP.is_set() and os.getppid() == parent:
+        try:
+            job = crud.claim(db, pid, LEASE)
+            if job is None:
+                if warm:
+                    warm = False
+                    warm_up()
+                    continue
+                time.sleep(poll)
                 continue
-            time.sleep(poll)
-            continue
-        warm = False
-        run_job(db, job, settings.data_dir)
+            warm = False
+            run_job(db, job, settings.data_dir)
+        except sqlite3.Error:  # a full disk or a locked database: the job's lease runs out and it is requeued
+            traceback.print_exc()
+            time.sleep(1.0)
+
+
+def _die_with(parent: int) -> None:
+    """Die when the supervisor's process does (Linux: PR_SET_PDEATHSIG), so that no orphan keeps
+    running a job that a restarted service runs again; a parent already gone ends us now."""
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # 1: PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # not Linux: the lease and the parent check below still hold
+        pass
+    if os.getppid() != parent:
+        os._exit(0)
+
+
+class Heartbeat:
+    """A thread that extends the job's lease every BEAT s; `lost` once the attempt no longer holds
+    it (or the database could not be written for a whole lease)."""
+
+    def __init__(self, db: DB, jid: str, attempt: int):
+        self.lost, self._done = threading.Event(), threading.Event()
+        self._args = (db, jid, attempt)
+        threading.Thread(target=self._run, daemon=True, name="tryon-heartbeat").start()
+
+    def _run(self) -> None:
+        last_ok = time.monotonic()
+        while not self._done.wait(BEAT):
+            try:
+                if not crud.heartbeat(*self._args, LEASE):
+                    self.lost.set()
+                    return
+                last_ok = time.monotonic()
+            except sqlite3.Error:
+                if time.monotonic() - last_ok > LEASE:
+                    self.lost.set()
+                    return
+
+    def stop(self) -> None:
+        self._done.set()
 
 
 def warm_up() -> dict:
@@ -76,32 +138,48 @@ def warm_up() -> dict:
 
 
 def run_job(db: DB, job: dict, data_dir: Path) -> None:
-    jid = job["id"]
-    out = job_dir(data_dir, jid)
+    """Run one claimed attempt: results written to its own folder, published by renaming it once
+    done, recorded only if this attempt still holds the job (fenced by the attempt number)."""
+    jid, attempt = job["id"], job["attempts"]
+    part = attempt_dir(data_dir, jid, attempt)
+    beat = Heartbeat(db, jid, attempt)
     last = [0.0]
 
     def progress(stage: str, fraction: float, message: str) -> None:
+        if STOP.is_set():
+            raise Stopped()
         now = time.monotonic()
         if now - last[0] < 0.3:
             return
         last[0] = now
         if crud.cancel_wanted(db, jid):
             raise Cancelled()
+        if beat.lost.is_set():
+            raise LeaseLost()
         crud.set_progress(db, jid, stage, fraction, message)
 
     def live(port: int) -> None:
         crud.set_viewer_port(db, jid, port)
 
     try:
-        report = _run(json.loads(job["request"]), out, progress, live)
+        report = _run(json.loads(job["request"]), part, progress, live)
+        final = attempt_dir(data_dir, jid, attempt, partial=False)
+        os.replace(part, final)
     except Exception as e:
-        shutil.rmtree(out, ignore_errors=True)
-        crud.finish(db, jid, *_failure(e))
+        shutil.rmtree(part, ignore_errors=True)
+        _record_failure(db, jid, attempt, e)
         return
-    if crud.get(db, "jobs", jid) is None:  # deleted while it ran
-        shutil.rmtree(out, ignore_errors=True)
-        return
-    crud.finish(db, jid, "done", None, report)
+    finally:
+        beat.stop()
+    if not crud.finish(db, jid, attempt, "done", None, report, final.name):
+        shutil.rmtree(final, ignore_errors=True)  # cancelled, deleted or requeued meanwhile: not ours
+
+
+def _record_failure(db: DB, jid: str, attempt: int, e: Exception) -> None:
+    if isinstance(e, Stopped):
+        crud.requeue(db, jid, attempt, "started again: the service was stopped while it ran")
+    elif not isinstance(e, LeaseLost):  # a lost job is recorded by whoever holds it now
+        crud.finish(db, jid, attempt, *_failure(e))
 
 
 def _failure(e: Exception) -> tuple[str, str]:
@@ -112,6 +190,8 @@ def _failure(e: Exception) -> tuple[str, str]:
         return "cancelled", "cancelled on request"
     if isinstance(e, TryonError):
         return "failed", str(e)
+    if isinstance(e, OSError) and e.errno in (errno.ENOSPC, errno.EDQUOT):
+        return "failed", "the server's disk filled up while writing the results: nothing was kept; try again later"
     traceback.print_exc()  # a bug: the job fails with the reason, the worker goes on
     return "failed", f"internal error ({type(e).__name__}: {e})"
 

@@ -81,11 +81,12 @@ def resolve(req: TryOnIn, db: DB, who: str) -> dict:
 
 def submit(req: TryOnIn, settings: Settings, db: DB, who: str) -> dict:
     """Queue a try-on; its row. 429 (with Retry-After) when the queue is full."""
-    jid = crud.enqueue(db, who, resolve(req, db, who), settings.queue_max)
-    if jid is None:
+    jid, full = crud.enqueue(db, who, resolve(req, db, who), settings.queue_max, settings.queue_per_token)
+    if full:
         wait = 30 * max(1, settings.queue_max // settings.workers)
-        raise HTTPException(429, f"the queue is full ({settings.queue_max} try-ons waiting): try again later",
-                            headers={"Retry-After": str(wait)})
+        why = (f"the queue is full ({settings.queue_max} try-ons waiting)" if full == "all" else
+               f"you have {settings.queue_per_token} try-ons waiting or running (TRYON_QUEUE_PER_TOKEN)")
+        raise HTTPException(429, f"{why}: try again later", headers={"Retry-After": str(wait)})
     return crud.get(db, "jobs", jid)
 
 

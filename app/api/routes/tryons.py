@@ -8,7 +8,7 @@ from fastapi.responses import FileResponse
 from app import crud
 from app.api.deps import DBDep, Owner, OwnedJob, SettingsDep
 from app.models import TryOnIn, job_public
-from app.queue.results import RESULT_FILES, job_dir
+from app.queue.results import RESULT_FILES, result_dir
 from app.services import tryons
 
 router = APIRouter(prefix="/api/tryons", tags=["tryons"])
@@ -43,7 +43,8 @@ def delete_tryon(row: OwnedJob, s: SettingsDep, db: DBDep):
 def result_file(row: OwnedJob, name: str, s: SettingsDep):
     if name not in RESULT_FILES:
         raise HTTPException(404, f"no result '{name}': results are {', '.join(RESULT_FILES)}")
-    p = job_dir(s.data_dir, row["id"]) / name
-    if not p.is_file():
+    d = result_dir(s.data_dir, row)
+    p = d / name if d else None
+    if p is None or not p.is_file():
         raise HTTPException(404, f"'{name}' is not there (yet): the try-on is not done, or did not make it")
     return FileResponse(p)

@@ -12,7 +12,7 @@ from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse
 
 from app import crud
 from app.api.deps import DBDep, SettingsDep, bearer, get_db, known
-from app.queue.results import job_dir
+from app.queue.results import result_dir
 
 router = APIRouter(prefix="/viewer", include_in_schema=False)
 VIEWER_COOKIE = "tryon_viewer"
@@ -44,8 +44,8 @@ def viewer_page(jid: str, s: SettingsDep, db: DBDep, token: str | None = Query(N
 
     t = token or tryon_viewer or bearer(authorization)
     row = viewer_job(s, db, jid, t)
-    rec = job_dir(s.data_dir, jid) / "recording.viser"
-    if row["status"] == "done" and rec.exists() and playbackPath is None:
+    d = result_dir(s.data_dir, row)
+    if d is not None and (d / "recording.viser").exists() and playbackPath is None:
         resp = RedirectResponse(f"/viewer/{jid}/?playbackPath=/viewer/{jid}/recording.viser")
     elif row["status"] not in ("running", "done"):
         raise HTTPException(409, f"try-on '{jid}' is {row['status']}: nothing to show "
@@ -59,11 +59,10 @@ def viewer_page(jid: str, s: SettingsDep, db: DBDep, token: str | None = Query(N
 @router.get("/{jid}/recording.viser")
 def viewer_recording(jid: str, s: SettingsDep, db: DBDep, token: str | None = Query(None),
                      tryon_viewer: str | None = Cookie(None)):
-    viewer_job(s, db, jid, token or tryon_viewer)
-    p = job_dir(s.data_dir, jid) / "recording.viser"
-    if not p.is_file():
+    d = result_dir(s.data_dir, viewer_job(s, db, jid, token or tryon_viewer))
+    if d is None or not (d / "recording.viser").is_file():
         raise HTTPException(404, "no recording (yet): the try-on is not done")
-    return FileResponse(p, media_type="application/octet-stream")
+    return FileResponse(d / "recording.viser", media_type="application/octet-stream")
 
 
 @router.websocket("/{jid}")
