@@ -7,7 +7,6 @@ that made them), so another token's id reads as missing.
 from __future__ import annotations
 
 import json
-import secrets
 import time
 import uuid
 
@@ -21,15 +20,26 @@ def new_id() -> str:
     return uuid.uuid4().hex[:16]
 
 
-# --- tokens -----------------------------------------------------------------------------------
-def issue_token(db: DB) -> str:
-    token = secrets.token_urlsafe(24)
-    db.run("INSERT INTO tokens (token, created) VALUES (?, ?)", token, time.time())
-    return token
+# --- tokens (kept as their keyed hashes: app/core/security.py) ----------------------------------
+def add_token(db: DB, token_hash: str) -> None:
+    db.run("INSERT INTO tokens (token, created) VALUES (?, ?)", token_hash, time.time())
 
 
-def token_known(db: DB, token: str) -> bool:
-    return db.one("SELECT token FROM tokens WHERE token=?", token) is not None
+def token_known(db: DB, token_hash: str) -> bool:
+    return db.one("SELECT token FROM tokens WHERE token=?", token_hash) is not None
+
+
+def hash_plain_tokens(db: DB, token_hash) -> None:
+    """Once: a database from before tokens were hashed gets every token and owner column hashed."""
+    with db.transaction() as c:
+        if c.execute("SELECT value FROM meta WHERE key='tokens'").fetchone():
+            return
+        for (t,) in c.execute("SELECT token FROM tokens").fetchall():
+            c.execute("UPDATE tokens SET token=? WHERE token=?", (token_hash(t), t))
+        for table in OWNED:
+            for (o,) in c.execute(f"SELECT DISTINCT owner FROM {table}").fetchall():
+                c.execute(f"UPDATE {table} SET owner=? WHERE owner=?", (token_hash(o), o))
+        c.execute("INSERT INTO meta (key, value) VALUES ('tokens', 'hmac-sha256')")
 
 
 # --- what a token owns ------------------------------------------------------------------------

@@ -41,15 +41,17 @@ def garment_public(row: dict) -> dict:
     return {"id": row["id"], "name": row["name"], "info": json.loads(row["info"] or "{}")}
 
 
-def job_public(row: dict, data_dir: Path) -> dict:
-    """A try-on as the API shows it: its state, request, and once done its report, files and viewer."""
+def job_public(row: dict, data_dir: Path, key: str) -> dict:
+    """A try-on as the API shows it: its state, request, and once done its report, files and viewer
+    -- their links signed with the job's `key` (short-lived; app/core/security.py)."""
     out = {k: row[k] for k in ("id", "status", "progress", "stage", "message", "error", "attempts")}
     out["request"] = json.loads(row["request"])
     d = result_dir(data_dir, row)
     if row["status"] == "done":
         out["report"] = json.loads(row["report"] or "{}")
-        out["files"] = {n: f"/api/tryons/{row['id']}/files/{n}" for n in RESULT_FILES if d and (d / n).exists()}
+        out["files"] = {n: f"/api/tryons/{row['id']}/files/{n}?key={key}" for n in RESULT_FILES
+                        if d and (d / n).exists()}
     live = row["status"] == "running" and row["viewer_port"]
     recorded = d is not None and (d / "recording.viser").exists()
-    out["viewer"] = f"/viewer/{row['id']}/" if live or recorded else None
+    out["viewer"] = f"/viewer/{row['id']}/?key={key}" if live or recorded else None
     return out

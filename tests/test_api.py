@@ -324,22 +324,30 @@ def test_viewer_relay_live_and_recording(tmp_path):
             if j["status"] == "running" and j["viewer"]:
                 break
             time.sleep(0.2)
-        assert j["viewer"] == f"/viewer/{jid}/", j
-        page = c.get(f"/viewer/{jid}/?token={tok}")
+        assert j["viewer"].startswith(f"/viewer/{jid}/?key="), j
+        key = j["viewer"].split("key=")[1]
+        page = c.get(j["viewer"])
         assert page.status_code == 200 and "<html" in page.text[:200].lower()
-        assert c.get(f"/viewer/{jid}/?token={other}").status_code == 404
+        assert tok not in page.headers.get("set-cookie", "")  # the cookie holds the job key, not the token
+        c.cookies.clear()
+        other_job = c.post("/api/tryons", json={"body": "default:female", "garment": "skirt"},
+                           headers={"Authorization": f"Bearer {other}"}).json()
+        other_key = other_job["viewer"] or c.app.state.keys.job_key(other_job["id"])
+        assert c.get(f"/viewer/{jid}/?key={other_key}").status_code == 401  # one job's key opens only it
+        assert c.get(f"/viewer/{jid}/?token={tok}").status_code == 401  # never the API token in a URL
         proto = f"viser-v{viser.__version__}"
-        with c.websocket_connect(f"/viewer/{jid}?token={tok}", subprotocols=[proto]) as ws:
+        with c.websocket_connect(f"/viewer/{jid}?key={key}", subprotocols=[proto]) as ws:
             assert ws.accepted_subprotocol == proto
             first = ws.receive_bytes()  # viser's messages (msgpack), relayed
             assert len(first) > 0
         j = wait(c, h, jid)
         assert j["status"] == "done", j
-        r = c.get(f"/viewer/{jid}/?token={tok}", follow_redirects=False)
+        r = c.get(j["viewer"], follow_redirects=False)
         assert r.status_code == 307 and "playbackPath" in r.headers["location"]
-        rec = c.get(f"/viewer/{jid}/recording.viser?token={tok}")
+        rec = c.get(f"/viewer/{jid}/recording.viser?key={key}")
         assert rec.status_code == 200 and len(rec.content) > 10000  # body + cloth frames
-        assert c.get(f"/viewer/{jid}/recording.viser?token={other}").status_code == 404
+        c.cookies.clear()
+        assert c.get(f"/viewer/{jid}/recording.viser?key={other_key}").status_code == 401
 
 
 def test_settings_tokens_and_listing(tmp_path):
@@ -356,7 +364,8 @@ def test_settings_tokens_and_listing(tmp_path):
         r = c.post("/api/tryons", json={"body_id": b["id"], "garment": g["id"], "size": "M"}, headers=h)
         assert r.status_code == 422 and "own size" in r.json()["error"]
         assert [x["id"] for x in c.get("/api/tryons", headers=h).json()] == [j.json()["id"]]
-        assert c.get(f"/viewer/{j.json()['id']}/?token=shop-backend").status_code == 409  # queued: nothing yet
+        key = c.app.state.keys.job_key(j.json()["id"])
+        assert c.get(f"/viewer/{j.json()['id']}/?key={key}").status_code == 409  # queued: nothing yet
         assert c.delete(f"/api/garments/{g['id']}", headers=h).status_code == 204
         assert c.get(f"/api/garments/{g['id']}", headers=h).status_code == 404
         assert not any((c.app.state.settings.data_dir / "uploads").glob("pattern-*"))

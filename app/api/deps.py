@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Callable
 
-from fastapi import Depends, Header, HTTPException, Path, Query
+from fastapi import Depends, Header, HTTPException, Path
 from starlette.requests import HTTPConnection
 
 from app import crud
 from app.core.config import Settings
 from app.core.db import DB
+from app.core.security import Keys
 from app.services.uploads import Upload
 
 
@@ -21,8 +22,13 @@ def get_db(conn: HTTPConnection) -> DB:
     return conn.app.state.db
 
 
+def get_keys(conn: HTTPConnection) -> Keys:
+    return conn.app.state.keys
+
+
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 DBDep = Annotated[DB, Depends(get_db)]
+KeysDep = Annotated[Keys, Depends(get_keys)]
 
 
 def bearer(authorization: str | None) -> str | None:
@@ -32,19 +38,16 @@ def bearer(authorization: str | None) -> str | None:
     return None
 
 
-def known(settings: Settings, db: DB, token: str | None) -> bool:
-    return bool(token) and (token in settings.tokens or crud.token_known(db, token))
-
-
-def current_owner(settings: SettingsDep, db: DBDep, authorization: str | None = Header(None),
-                  token: str | None = Query(None)) -> str:
-    """The API token asking (header, or ?token= for downloads and the page): it owns what it makes."""
-    t = bearer(authorization) or token
+def current_owner(keys: KeysDep, db: DBDep, authorization: str | None = Header(None)) -> str:
+    """Who asks: the keyed hash of the API token in the Authorization header (only there: never
+    in a URL, where logs keep it). It owns what it makes."""
+    t = bearer(authorization)
     if not t:
         raise HTTPException(401, "no API token: send 'Authorization: Bearer <token>' (POST /api/tokens gives one)")
-    if not known(settings, db, t):
+    h = keys.token_hash(t)
+    if not (keys.is_fixed(t) or crud.token_known(db, h)):
         raise HTTPException(401, "unknown API token: create one with POST /api/tokens")
-    return t
+    return h
 
 
 Owner = Annotated[str, Depends(current_owner)]
@@ -77,3 +80,26 @@ def _owned_row(table: str, param: str):
 OwnedBody = _owned_row("bodies", "bid")
 OwnedGarment = _owned_row("garments", "gid")
 OwnedJob = _owned_row("jobs", "jid")
+
+
+def job_view(s: SettingsDep, keys: KeysDep):
+    """row -> the try-on's JSON, its links signed with a fresh job key."""
+    from app.models import job_public
+
+    return lambda row: job_public(row, s.data_dir, keys.job_key(row["id"]))
+
+
+JobView = Annotated[Callable[[dict], dict], Depends(job_view)]
+
+
+def job_opened(db: DBDep, keys: KeysDep, jid: str, key: str | None, authorization: str | None) -> dict:
+    """A job opened by its signed key (links, the viewer) or by its owner's token; else 401/404."""
+    if keys.opens(key, jid):
+        row = crud.get(db, "jobs", jid)
+    elif authorization:
+        return owned(db, "jobs", jid, current_owner(keys, db, authorization))
+    else:
+        raise HTTPException(401, "this link has expired or is not valid: open the try-on again for a fresh one")
+    if row is None:
+        raise HTTPException(404, f"no try-on '{jid}'")
+    return row

@@ -8,6 +8,11 @@
     TRYON_WORKERS         worker processes (each runs one try-on at a time)     (1)
     TRYON_ATTEMPTS        how often a try-on cut off by a restart is started    (2)
     TRYON_TOKENS          comma-separated API tokens accepted besides issued ones
+    TRYON_SECRET          key the API tokens are stored hashed with        (random, DATA/secret.key)
+    TRYON_LINK_SECONDS    how long a try-on's result and viewer links work      (3600)
+    TRYON_TOKEN_ISSUE     who may get a token: open, or admin (X-Admin-Key)     (open)
+    TRYON_ADMIN_KEY       the admin key for TRYON_TOKEN_ISSUE=admin
+    TRYON_TOKENS_PER_MINUTE  tokens issued to one client address a minute     (10)
     TRYON_PARSE_SECONDS   time an upload's read may take                        (60)
     TRYON_PARSE_MB        memory an upload's read may take                      (2048)
     TRYON_PARSE_SLOTS     uploads read at once; more wait                       (2)
@@ -22,7 +27,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import Field, field_validator
 from pydantic_settings import NoDecode, SettingsConfigDict
@@ -41,6 +46,11 @@ class Settings(EngineSettings):
     workers: int = Field(1, ge=1, le=16)
     attempts: int = Field(2, ge=1, le=10)
     tokens: Annotated[list[str], NoDecode] = []
+    secret: str | None = Field(None, repr=False)         # the key tokens are hashed with (else DATA/secret.key)
+    link_seconds: float = Field(3600.0, gt=0)            # how long a job's result/viewer links work
+    token_issue: Literal["open", "admin"] = "open"       # who may POST /api/tokens
+    admin_key: str | None = Field(None, repr=False)      # with token_issue admin: the X-Admin-Key header
+    tokens_per_minute: int = Field(10, ge=1)             # tokens one client address may be issued
     parse_seconds: float = Field(60.0, gt=0, le=3600)   # one upload's read, wall and CPU time
     parse_mb: int = Field(2048, ge=256)                  # memory one upload's read may take
     parse_slots: int = Field(2, ge=1, le=64)             # uploads read at once (more wait)

@@ -9,7 +9,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 SCHEMA = """
-CREATE TABLE IF NOT EXISTS tokens (token TEXT PRIMARY KEY, created REAL);
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT);
+CREATE TABLE IF NOT EXISTS tokens (token TEXT PRIMARY KEY, created REAL);  -- token: its keyed hash
 CREATE TABLE IF NOT EXISTS bodies (id TEXT PRIMARY KEY, owner TEXT, kind TEXT, spec TEXT, name TEXT,
     created REAL, info TEXT);
 CREATE TABLE IF NOT EXISTS garments (id TEXT PRIMARY KEY, owner TEXT, file TEXT, name TEXT, created REAL,

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter, HTTPException
+from fastapi import APIRouter, Header, HTTPException, Query
 from fastapi.responses import FileResponse
 
 from app import crud
-from app.api.deps import DBDep, Owner, OwnedJob, SettingsDep
-from app.models import TryOnIn, job_public
+from app.api.deps import DBDep, JobView, KeysDep, Owner, OwnedJob, SettingsDep, job_opened
+from app.models import TryOnIn
 from app.queue.results import RESULT_FILES, result_dir
 from app.services import tryons
 
@@ -15,23 +15,23 @@ router = APIRouter(prefix="/api/tryons", tags=["tryons"])
 
 
 @router.post("", status_code=202)
-def create_tryon(req: TryOnIn, who: Owner, s: SettingsDep, db: DBDep):
-    return job_public(tryons.submit(req, s, db, who), s.data_dir)
+def create_tryon(req: TryOnIn, who: Owner, s: SettingsDep, db: DBDep, show: JobView):
+    return show(tryons.submit(req, s, db, who))
 
 
 @router.get("")
-def list_tryons(who: Owner, s: SettingsDep, db: DBDep):
-    return [job_public(r, s.data_dir) for r in crud.list_owned(db, "jobs", who)]
+def list_tryons(who: Owner, db: DBDep, show: JobView):
+    return [show(r) for r in crud.list_owned(db, "jobs", who)]
 
 
 @router.get("/{jid}")
-def get_tryon(row: OwnedJob, s: SettingsDep):
-    return job_public(row, s.data_dir)
+def get_tryon(row: OwnedJob, show: JobView):
+    return show(row)
 
 
 @router.post("/{jid}/cancel", status_code=202)
-def cancel_tryon(row: OwnedJob, s: SettingsDep, db: DBDep):
-    return job_public(tryons.cancel(row, db), s.data_dir)
+def cancel_tryon(row: OwnedJob, db: DBDep, show: JobView):
+    return show(tryons.cancel(row, db))
 
 
 @router.delete("/{jid}", status_code=204)
@@ -40,7 +40,10 @@ def delete_tryon(row: OwnedJob, s: SettingsDep, db: DBDep):
 
 
 @router.get("/{jid}/files/{name}")
-def result_file(row: OwnedJob, name: str, s: SettingsDep):
+def result_file(jid: str, name: str, s: SettingsDep, db: DBDep, keys: KeysDep, key: str | None = Query(None),
+                authorization: str | None = Header(None)):
+    """A result, by the job's signed link (`files` of the try-on) or with the owner's token."""
+    row = job_opened(db, keys, jid, key, authorization)
     if name not in RESULT_FILES:
         raise HTTPException(404, f"no result '{name}': results are {', '.join(RESULT_FILES)}")
     d = result_dir(s.data_dir, row)

@@ -1,6 +1,7 @@
 """The live viewer (viser), relayed: the worker's viser server behind /viewer/{job}, and the
-recording of a finished try-on played back. The page sets a cookie scoped to the job's path so
-that the viser client's own requests (its websocket, the recording) carry the token."""
+recording of a finished try-on played back. Opened by the job's signed key
+(?key=, from the try-on's `viewer` link); the page keeps it in a cookie scoped to the job's path
+so that the viser client's own requests (its websocket, the recording) carry it."""
 
 from __future__ import annotations
 
@@ -11,21 +12,11 @@ from fastapi import APIRouter, Cookie, Header, HTTPException, Query, Request, We
 from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse
 
 from app import crud
-from app.api.deps import DBDep, SettingsDep, bearer, get_db, known
+from app.api.deps import DBDep, KeysDep, SettingsDep, get_db, get_keys, job_opened
 from app.queue.results import result_dir
 
 router = APIRouter(prefix="/viewer", include_in_schema=False)
-VIEWER_COOKIE = "tryon_viewer"
-
-
-def viewer_job(s, db, jid: str, token: str | None) -> dict:
-    """The job `jid` of `token` (from ?token=, the cookie or the header), else 401/404."""
-    if not known(s, db, token):
-        raise HTTPException(401, "open the viewer with ?token=<your API token>")
-    row = crud.get_owned(db, "jobs", jid, token)
-    if row is None:
-        raise HTTPException(404, f"no try-on '{jid}' for this token")
-    return row
+VIEWER_COOKIE = "tryon_viewer"  # holds the job's key (never the API token), scoped to /viewer/<job>
 
 
 @router.get("/{jid}")
@@ -35,15 +26,14 @@ def viewer_slash(jid: str, request: Request):
 
 
 @router.get("/{jid}/")
-def viewer_page(jid: str, s: SettingsDep, db: DBDep, token: str | None = Query(None),
+def viewer_page(jid: str, request: Request, s: SettingsDep, db: DBDep, keys: KeysDep, key: str | None = Query(None),
                 playbackPath: str | None = Query(None), tryon_viewer: str | None = Cookie(None),
                 authorization: str | None = Header(None)):
     """The viser client. While the try-on runs it connects back to ws://…/viewer/{jid} (relayed
     to the worker's viser server); once done it plays the try-on's recording."""
     import viser
 
-    t = token or tryon_viewer or bearer(authorization)
-    row = viewer_job(s, db, jid, t)
+    row = job_opened(db, keys, jid, key or tryon_viewer, authorization)
     d = result_dir(s.data_dir, row)
     if d is not None and (d / "recording.viser").exists() and playbackPath is None:
         resp = RedirectResponse(f"/viewer/{jid}/?playbackPath=/viewer/{jid}/recording.viser")
@@ -52,14 +42,15 @@ def viewer_page(jid: str, s: SettingsDep, db: DBDep, token: str | None = Query(N
                                  + ("yet (it has not started)" if row["status"] == "queued" else ""))
     else:
         resp = HTMLResponse((Path(viser.__file__).parent / "client" / "build" / "index.html").read_text())
-    resp.set_cookie(VIEWER_COOKIE, t, path=f"/viewer/{jid}", httponly=True, samesite="strict")
+    resp.set_cookie(VIEWER_COOKIE, keys.job_key(jid), path=f"/viewer/{jid}", httponly=True, samesite="strict",
+                    secure=request.url.scheme == "https", max_age=int(s.link_seconds))
     return resp
 
 
 @router.get("/{jid}/recording.viser")
-def viewer_recording(jid: str, s: SettingsDep, db: DBDep, token: str | None = Query(None),
+def viewer_recording(jid: str, s: SettingsDep, db: DBDep, keys: KeysDep, key: str | None = Query(None),
                      tryon_viewer: str | None = Cookie(None)):
-    d = result_dir(s.data_dir, viewer_job(s, db, jid, token or tryon_viewer))
+    d = result_dir(s.data_dir, job_opened(db, keys, jid, key or tryon_viewer, None))
     if d is None or not (d / "recording.viser").is_file():
         raise HTTPException(404, "no recording (yet): the try-on is not done")
     return FileResponse(d / "recording.viser", media_type="application/octet-stream")
@@ -71,8 +62,8 @@ async def viewer_socket(ws: WebSocket, jid: str):
     subprotocol (viser-v<version>) through; both directions as they come."""
     from websockets.asyncio.client import connect
 
-    t = ws.query_params.get("token") or ws.cookies.get(VIEWER_COOKIE)
-    row = crud.get_owned(get_db(ws), "jobs", jid, t) if t else None
+    key = ws.query_params.get("key") or ws.cookies.get(VIEWER_COOKIE)
+    row = crud.get(get_db(ws), "jobs", jid) if get_keys(ws).opens(key, jid) else None
     if row is None or not row["viewer_port"] or row["status"] != "running":
         await ws.close(code=4404, reason="no live viewer for this try-on (not running, or not yours)")
         return
