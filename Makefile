@@ -6,7 +6,7 @@ OUT ?= out/demo
 
 PORT ?= 8000
 
-.PHONY: setup run demo test test-slow bench bench-peer clean clean-kernels
+.PHONY: setup run demo test test-slow fuzz bench bench-peer clean clean-kernels
 
 setup:
 	@bash scripts/setup.sh
@@ -30,6 +30,11 @@ test: setup
 
 test-slow: setup
 	$(VENV)/python -m pytest -m slow -q $(PYTEST_ARGS)
+
+# The long fuzzing run: 10,000 malformed inputs per parser (tests/fuzz/run.py; failing inputs in out/fuzz/).
+FUZZ_INPUTS ?= 10000
+fuzz: setup
+	$(VENV)/python -m tests.fuzz.run --inputs $(FUZZ_INPUTS) --out out/fuzz
 
 bench: setup
 	$(VENV)/tryon bench --out out/bench

@@ -1,6 +1,10 @@
 """Errors the engine raises for bad input. The CLI and the service turn them into a one-line
 message and a non-zero exit / a JSON error; anything else escaping is a bug."""
 
+import struct
+import zipfile
+import zlib
+
 
 class TryonError(Exception):
     """Base class: the message says what is wrong and how to fix it."""
@@ -21,7 +25,8 @@ class SimulationError(TryonError):
 # What malformed bytes make parsers and the libraries under them raise (trimesh, json, zipfile,
 # struct, NumPy, SciPy): at a parser's public entry they become one InputError.
 MALFORMED = (ValueError, TypeError, LookupError, AttributeError, ArithmeticError, RecursionError,
-             UnicodeError, EOFError, OSError, MemoryError, AssertionError)
+             UnicodeError, EOFError, OSError, MemoryError, AssertionError, struct.error, zipfile.BadZipFile,
+             zipfile.LargeZipFile, zlib.error)
 
 
 class reading:

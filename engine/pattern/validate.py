@@ -36,6 +36,8 @@ def validate(spec: PatternSpec) -> list[Problem]:
     """All problems found, errors first."""
     out: list[Problem] = []
     scale, rel = spec.scale, spec.properties.curvature_coords == "relative"
+    if not (np.isfinite(scale) and scale > 0):
+        return [Problem("error", None, None, f"the pattern's units give a scale of {scale}: use cm, mm, m or inch")]
     panels = spec.pattern.panels
     for name, panel in panels.items():
         out += _check_panel(name, panel, scale, rel)
@@ -76,6 +78,8 @@ def validate(spec: PatternSpec) -> list[Problem]:
 def _check_panel(name: str, panel, scale: float, rel: bool) -> list[Problem]:
     out: list[Problem] = []
     edges = panel.edges
+    if not (np.all(np.isfinite(panel.translation)) and np.all(np.isfinite(panel.rotation))):
+        return [Problem("error", name, None, "placement (translation or rotation) is not a finite number")]
     if len(edges) < 2:
         return [Problem("error", name, None, f"a panel needs a closed outline of at least 2 edges, got {len(edges)}")]
     for i, e in enumerate(edges):
