@@ -7,6 +7,7 @@
     TRYON_QUEUE_PER_TOKEN one token's try-ons waiting or running; more get 429  (5)
     TRYON_WORKERS         worker processes (each runs one try-on at a time)     (1)
     TRYON_ATTEMPTS        how often a try-on cut off by a restart is started    (2)
+    TRYON_LEASE_SECONDS   a running try-on whose worker is silent this long is started again (30)
     TRYON_TOKENS          comma-separated API tokens accepted besides issued ones
     TRYON_SECRET          key the API tokens are stored hashed with        (random, DATA/secret.key)
     TRYON_LINK_SECONDS    how long a try-on's result and viewer links work      (3600)
@@ -45,6 +46,7 @@ class Settings(EngineSettings):
     queue_per_token: int = Field(5, ge=1)                # one token's try-ons waiting or running
     workers: int = Field(1, ge=1, le=16)
     attempts: int = Field(2, ge=1, le=10)
+    lease_seconds: float = Field(30.0, ge=2, le=3600)   # a job stays a worker's this long without a heartbeat
     tokens: Annotated[list[str], NoDecode] = []
     secret: str | None = Field(None, repr=False)         # the key tokens are hashed with (else DATA/secret.key)
     link_seconds: float = Field(3600.0, gt=0)            # how long a job's result/viewer links work

@@ -29,8 +29,6 @@ from app.core.db import DB
 from app.queue.results import attempt_dir
 
 
-LEASE = 30.0  # s a claimed job stays this worker's without a heartbeat
-BEAT = 5.0    # s between heartbeats
 STOP = threading.Event()  # set by SIGTERM: finish the step, give the job back, exit
 
 
@@ -57,7 +55,7 @@ def worker_main(settings: Settings, parent: int, poll: float = 0.2) -> None:
     warm = True  # warm up once, while no try-on waits (one that does is not kept waiting for it)
     while not STOP.is_set() and os.getppid() == parent:
         try:
-            job = crud.claim(db, pid, LEASE)
+            job = crud.claim(db, pid, settings.lease_seconds)
             if job is None:
                 if warm:
                     warm = False
@@ -66,7 +64,7 @@ def worker_main(settings: Settings, parent: int, poll: float = 0.2) -> None:
                 time.sleep(poll)
                 continue
             warm = False
-            run_job(db, job, settings.data_dir)
+            run_job(db, job, settings.data_dir, settings.lease_seconds)
         except sqlite3.Error:  # a full disk or a locked database: the job's lease runs out and it is requeued
             traceback.print_exc()
             time.sleep(1.0)
@@ -84,24 +82,24 @@ def _die_with(parent: int) -> None:
 
 
 class Heartbeat:
-    """A thread that extends the job's lease every BEAT s; `lost` once the attempt no longer holds
-    it (or the database could not be written for a whole lease)."""
+    """A thread that extends the job's lease every sixth of it; `lost` once the attempt no longer
+    holds it (or the database could not be written for a whole lease)."""
 
-    def __init__(self, db: DB, jid: str, attempt: int):
+    def __init__(self, db: DB, jid: str, attempt: int, lease: float):
         self.lost, self._done = threading.Event(), threading.Event()
-        self._args = (db, jid, attempt)
+        self._args, self.lease = (db, jid, attempt), lease
         threading.Thread(target=self._run, daemon=True, name="tryon-heartbeat").start()
 
     def _run(self) -> None:
         last_ok = time.monotonic()
-        while not self._done.wait(BEAT):
+        while not self._done.wait(self.lease / 6):
             try:
-                if not crud.heartbeat(*self._args, LEASE):
+                if not crud.heartbeat(*self._args, self.lease):
                     self.lost.set()
                     return
                 last_ok = time.monotonic()
             except sqlite3.Error:
-                if time.monotonic() - last_ok > LEASE:
+                if time.monotonic() - last_ok > self.lease:
                     self.lost.set()
                     return
 
@@ -137,12 +135,12 @@ def warm_up() -> dict:
     return {"seconds": time.perf_counter() - t0, "ok": ok}
 
 
-def run_job(db: DB, job: dict, data_dir: Path) -> None:
+def run_job(db: DB, job: dict, data_dir: Path, lease: float = 30.0) -> None:
     """Run one claimed attempt: results written to its own folder, published by renaming it once
     done, recorded only if this attempt still holds the job (fenced by the attempt number)."""
     jid, attempt = job["id"], job["attempts"]
     part = attempt_dir(data_dir, jid, attempt)
-    beat = Heartbeat(db, jid, attempt)
+    beat = Heartbeat(db, jid, attempt, lease)
     last = [0.0]
 
     def progress(stage: str, fraction: float, message: str) -> None:
