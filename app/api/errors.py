@@ -5,9 +5,10 @@ from __future__ import annotations
 import errno
 import sqlite3
 
-from fastapi import FastAPI, HTTPException, Request
+from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException  # FastAPI's and Starlette's own (a body that is not UTF-8, 404, 405)
 
 from app.services.uploads import DISK_FULL
 

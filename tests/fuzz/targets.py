@@ -154,3 +154,48 @@ TARGETS = {t.name: t for t in [
     Target("dxf", "text", lambda: [_dxf_pair()[0]], lambda b: _dxf_with(b, _dxf_pair()[1]), _pattern_finite),
     Target("assembly", "json", lambda: [_dxf_pair()[1]], lambda b: _dxf_with(_dxf_pair()[0], b), _pattern_finite),
 ]}
+
+
+_API: dict = {}
+
+
+def _api_client():
+    """One service (workers not started) per fuzzing process, with one token."""
+    if not _API:
+        from fastapi.testclient import TestClient
+
+        from app.core.config import Settings
+        from app.main import create_app
+
+        c = TestClient(create_app(Settings(data_dir=Path(tempfile.mkdtemp()) / "data", queue_max=10 ** 9,
+                                           queue_per_token=10 ** 9), start_workers=False))
+        c.__enter__()
+        _API.update(client=c, headers={"Authorization": "Bearer " + c.post("/api/tokens").json()["token"],
+                                       "Content-Type": "application/json"})
+    return _API["client"], _API["headers"]
+
+
+def _api_bodies(data: bytes):
+    """The bytes as the JSON body of POST /api/tryons and POST /api/bodies/default: a 4xx is the
+    project's refusal, a 5xx a failure."""
+    from engine.errors import InputError
+
+    c, h = _api_client()
+    out = []
+    for path in ("/api/tryons", "/api/bodies/default"):
+        r = c.post(path, content=data, headers=h)
+        if r.status_code >= 500:
+            raise RuntimeError(f"{path}: {r.status_code} {r.text[:200]}")
+        if r.status_code >= 400 and not isinstance(r.json().get("error"), str):
+            raise RuntimeError(f"{path}: {r.status_code} without an error message")
+        out.append(r.status_code)
+    if all(s >= 400 for s in out):
+        raise InputError(f"refused: {out}")
+    return out
+
+
+TARGETS["api"] = Target("api", "json", lambda: [
+    json.dumps({"body": "default:female,height=1.7", "garment": "skirt", "size": "M", "fabric": "silk",
+                "motion": "walk", "seconds": 2.0, "resolution_cm": 2.0, "preset": "male", "weight": 0.6}).encode(),
+    json.dumps({"preset": "female", "height": 1.6, "garment": "dress", "body": "default:male"}).encode()],
+    _api_bodies, lambda r: True)
