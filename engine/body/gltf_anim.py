@@ -32,6 +32,8 @@ _NORM = {np.int8: 127.0, np.uint8: 255.0, np.int16: 32767.0, np.uint16: 65535.0}
 MAX_SECONDS = 120.0
 MAX_FRAMES = 3000  # frames sampled at most (engine.body.animation refuses more too)
 MAX_VALUES = 50_000_000  # accessor values (count x width) and sampled coordinates at most: ~400 MB in float64
+MAX_PARTS = 512  # triangle primitives in the scene: a body is one or a few meshes (3,000 copies of one
+                 # 20-vertex primitive, a 240 KB file, took 30 s to merge)
 
 
 class _File:
@@ -105,6 +107,9 @@ class _File:
             data = self.buffers[view["buffer"]]
             start = view.get("byteOffset", 0) + a.get("byteOffset", 0)
             stride = view.get("byteStride") or item * width
+            if stride < item * width:  # rows would overlap: one small buffer read as many elements
+                raise InputError(f"{self.name}: accessor {i} has a byte stride of {stride}, less than its "
+                                 f"element ({item * width} bytes): the file is corrupt")
             end = start + (count - 1) * stride + item * width if count else start
             if end > view.get("byteOffset", 0) + view["byteLength"] or end > len(data):
                 raise InputError(f"{self.name}: accessor {i} reads past its buffer: the file is corrupt")
@@ -320,6 +325,9 @@ def sample_gltf_animation(path: str | Path, fps: float) -> tuple[np.ndarray, np.
                         raise InputError(f"{path.name}: a vertex names joint {joints.max()}, the skin has "
                                          f"{len(skin['joints'])}")
             prims.append((i, pos, targets, default_w, skin, joints, weights))
+            if len(prims) > MAX_PARTS:
+                raise InputError(f"{path.name} has more than {MAX_PARTS} mesh parts: a body is one mesh (or a few); "
+                                 "merge them on export")
             faces.append(idx.reshape(-1, 3) + offset)
             offset += len(pos)
     if not prims:

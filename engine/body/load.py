@@ -33,6 +33,7 @@ SUPPORTED = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0), "-z": (2, -1.0)}
 UNITS = ((1.0, "metres"), (0.1, "decimetres"), (0.01, "centimetres"), (0.001, "millimetres"))
 HUMAN_HEIGHT = (0.5, 2.5)  # m; the unit scales give non-overlapping raw ranges
+MAX_PARTS = 512  # mesh parts placed in a scene file (one small part placed thousands of times took minutes)
 TINY_PIECE = 0.01  # drop components under this fraction of the total surface area
 
 
@@ -131,6 +132,9 @@ def _read(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
     try:
         scene = trimesh.load_scene(str(path), file_type=ext[1:], process=False)
+        if len(scene.graph.nodes_geometry) > MAX_PARTS:  # checked before the copies are made
+            raise InputError(f"{path.name} places more than {MAX_PARTS} mesh parts: a body is one mesh (or a few); "
+                             "merge them on export")
         geoms = scene.dump(concatenate=False)
     except Exception as e:  # trimesh raises anything on garbage; the user needs one line
         msg = str(e).splitlines()[0][:120] if str(e) else type(e).__name__

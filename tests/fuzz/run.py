@@ -32,6 +32,10 @@ class Hang(Exception):
     pass
 
 
+def _hang(*_):
+    raise Hang()
+
+
 def _vm_size() -> int:
     with open("/proc/self/status") as f:
         return next(int(ln.split()[1]) * 1024 for ln in f if ln.startswith("VmSize:"))
@@ -41,6 +45,7 @@ def _classify(target, raw: bytes) -> tuple[str, str]:
     """(outcome, detail) of one input."""
     from engine.errors import TryonError
 
+    signal.signal(signal.SIGALRM, _hang)
     signal.setitimer(signal.ITIMER_REAL, HANG_SECONDS * 2)
     try:
         result = target.parse(raw)
@@ -70,7 +75,6 @@ def run_target(name: str, n: int, seconds: float, out: Path) -> dict:
 
     target = TARGETS[name]
     seeds = target.seeds()
-    signal.signal(signal.SIGALRM, lambda *_: (_ for _ in ()).throw(Hang()))
     for s in seeds:  # warm: imports, caches, compiled kernels are not the inputs' cost
         _classify(target, s)
     cap = _vm_size() + MEMORY_CAP
