@@ -6,6 +6,7 @@ JSON chunk, the binary chunk, the members and their stated sizes."""
 from __future__ import annotations
 
 import io
+import itertools
 import json
 import re
 import struct
@@ -79,7 +80,7 @@ def _paths(obj, prefix=()):
 def json_edits(draw, doc):
     doc = json.loads(json.dumps(doc))
     for _ in range(draw(st.integers(1, 4))):
-        paths = [p for p in _paths(doc) if p]
+        paths = list(itertools.islice((p for p in _paths(doc) if p), 100_000))
         if not paths:
             break
         path = draw(st.sampled_from(paths))
@@ -97,7 +98,9 @@ def json_edits(draw, doc):
                 v = [v]
             parent[path[-1]] = v
         elif op == "grow" and isinstance(parent[path[-1]], list) and parent[path[-1]]:
-            parent[path[-1]] = parent[path[-1]] * draw(st.sampled_from([2, 100, 3000]))
+            n = draw(st.sampled_from([2, 100, 3000]))
+            if len(json.dumps(parent[path[-1]])) * n < 20_000_000:  # the input, not the mutator, should be big
+                parent[path[-1]] = parent[path[-1]] * n
     return doc
 
 
