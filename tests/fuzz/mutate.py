@@ -99,7 +99,7 @@ def json_edits(draw, doc):
             parent[path[-1]] = v
         elif op == "grow" and isinstance(parent[path[-1]], list) and parent[path[-1]]:
             n = draw(st.sampled_from([2, 100, 3000]))
-            if len(json.dumps(parent[path[-1]])) * n < 20_000_000:  # the input, not the mutator, should be big
+            if len(_dumps(parent[path[-1]])) * n < 20_000_000:  # the input, not the mutator, should be big
                 parent[path[-1]] = parent[path[-1]] * n
     return doc
 
