@@ -126,12 +126,13 @@ def main(argv=None) -> int:
         cmd = [sys.executable, "-m", "tests.fuzz.run", "--one", name, "--inputs", str(a.inputs),
                "--seconds", str(a.seconds), "--out", str(a.out)]
         t0 = time.perf_counter()
-        p = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "PYTHONHASHSEED": "0"})
-        try:
+        try:  # a target that stalls in native code is stopped here (inputs are timed inside)
+            p = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "PYTHONHASHSEED": "0"},
+                               timeout=min(a.seconds + 120, 60 + a.inputs * HANG_SECONDS))
             row = json.loads(p.stdout.strip().splitlines()[-1])
-        except (IndexError, json.JSONDecodeError):
-            row = {"target": name, "inputs": 0, "failed": 1,
-                   "failures": [{"outcome": "died", "detail": f"exit {p.returncode}: {p.stderr[-500:]}"}]}
+        except (IndexError, json.JSONDecodeError, subprocess.TimeoutExpired) as e:
+            why = "timed out" if isinstance(e, subprocess.TimeoutExpired) else f"exit {p.returncode}: {p.stderr[-500:]}"
+            row = {"target": name, "inputs": 0, "failed": 1, "failures": [{"outcome": "died", "detail": why}]}
         row["wall_s"] = round(time.perf_counter() - t0, 1)
         rows.append(row)
         bad += row["failed"]
