@@ -164,6 +164,8 @@ def requeue_stale(db: DB, attempts: int, expired_only: bool = True) -> list[str]
     now = time.time()
     cond = "status='running'" + (" AND lease_until < ?" if expired_only else "")
     args = (now,) if expired_only else ()
+    if db.one(f"SELECT id FROM jobs WHERE {cond} LIMIT 1", *args) is None:  # the usual case: no write lock taken
+        return []
     with db.transaction() as c:
         ids = [r[0] for r in c.execute(f"SELECT id FROM jobs WHERE {cond}", args)]
         c.execute("UPDATE jobs SET status='queued', worker_pid=NULL, lease_until=NULL, viewer_port=NULL, stage='', "
