@@ -100,7 +100,8 @@ def json_edits(draw, doc):
         elif op == "grow" and isinstance(parent[path[-1]], list) and parent[path[-1]]:
             n = draw(st.sampled_from([2, 100, 3000]))
             if len(_dumps(parent[path[-1]])) * n < 20_000_000:  # the input, not the mutator, should be big
-                parent[path[-1]] = parent[path[-1]] * n
+                # copies, not n references to one list: a later edit inside must not multiply again
+                parent[path[-1]] = json.loads(_dumps(parent[path[-1]] * n))
     return doc
 
 
