@@ -66,6 +66,34 @@ def _zip_bomb(gib: float = 2.0) -> bytes:
     return buf.getvalue()
 
 
+def _oversized(port: int, path: str, headers: dict, total: int, declared: bool) -> str:
+    """Send a `total`-byte body, with its Content-Length or chunked, until the service answers;
+    the status and how much was sent by then."""
+    head = "".join(f"{k}: {v}\r\n" for k, v in headers.items())
+    head += f"Content-Length: {total}\r\n" if declared else "Transfer-Encoding: chunked\r\n"
+    s = socket.create_connection(("127.0.0.1", port), timeout=60)
+    s.sendall(f"POST {path} HTTP/1.1\r\nHost: x\r\n{head}\r\n".encode())
+    sent, block = 0, b"0," * (1 << 19)
+    s.setblocking(False)
+    answer = b""
+    while sent < total:
+        try:
+            answer += s.recv(4096)
+            if answer:
+                break
+        except BlockingIOError:
+            pass
+        try:
+            sent += s.send(block if declared else b"%x\r\n%s\r\n" % (len(block), block))
+        except (BlockingIOError, OSError):
+            time.sleep(0.001)
+    s.setblocking(True)
+    while b"\r\n" not in answer:
+        answer += s.recv(4096) or b"\r\n"
+    s.close()
+    return f"{answer.split()[1].decode()} after {sent >> 20} MB sent"
+
+
 def _rss_mb(pid: int) -> float:
     """Resident memory of `pid` and its descendants (workers, fenced readers), MB."""
     total, todo = 0, [pid]
@@ -84,6 +112,7 @@ def _rss_mb(pid: int) -> float:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=40.0, help="how long the ordinary client keeps asking")
+    ap.add_argument("--no-attack", action="store_true", help="the ordinary client alone (the baseline)")
     a = ap.parse_args()
     print("preparing the hostile inputs (the zip bomb takes a few seconds)...", flush=True)
     glb, pattern, bomb = _cycle_glb(), _big_pattern(), _zip_bomb()
@@ -104,7 +133,7 @@ def main() -> int:
             except httpx.HTTPError:
                 time.sleep(0.2)
         tok = lambda: {"Authorization": "Bearer " + httpx.post(url + "/api/tokens").json()["token"]}  # noqa: E731
-        good, bad = tok(), tok()
+        good, bad, other = tok(), tok(), [tok() for _ in range(4)]
 
         def hit(kind, method, path, headers, **kw):
             try:
@@ -133,12 +162,12 @@ def main() -> int:
         attacks = [
             *[lambda: hit("node-cycle glb", "POST", "/api/bodies", bad, files={"file": ("w.glb", glb)})
               for _ in range(40)],
-            lambda: hit("8000-edge pattern", "POST", "/api/garments", bad, files={"file": ("p.json", pattern)}),
-            lambda: hit("zip bomb", "POST", "/api/bodies", tok(), files={"file": ("w.zip", bomb)}),
-            lambda: hit("300 MB upload", "POST", "/api/bodies", tok(),
-                        files={"file": ("big.obj", b"v 0 0 0\n" * (300 << 17))}),
-            lambda: hit("200 MB JSON", "POST", "/api/tryons", bad, content=b"[" + b"0," * (100 << 20) + b"0]",
-                        headers={**bad, "Content-Type": "application/json"}),
+            lambda: hit("8000-edge pattern", "POST", "/api/garments", other[0], files={"file": ("p.json", pattern)}),
+            lambda: hit("zip bomb", "POST", "/api/bodies", other[1], files={"file": ("w.zip", bomb)}),
+            lambda: statuses.update({("300 MB upload", _oversized(port, "/api/bodies", {
+                **other[2], "Content-Type": "multipart/form-data; boundary=x"}, 300 << 20, True)): 1}),
+            lambda: statuses.update({("200 MB JSON, chunked", _oversized(port, "/api/tryons", {
+                **other[3], "Content-Type": "application/json"}, 200 << 20, False)): 1}),
             *[lambda: hit("50 try-ons, one token", "POST", "/api/tryons", bad,
                           json={"body": "default:female", "garment": "skirt", "resolution_cm": 4}) for _ in range(50)],
         ]
@@ -146,7 +175,7 @@ def main() -> int:
         for t in threads:
             t.start()
         time.sleep(2.0)  # the ordinary client's quiet baseline first
-        workers = [threading.Thread(target=f, daemon=True) for f in attacks]
+        workers = [threading.Thread(target=f, daemon=True) for f in ([] if a.no_attack else attacks)]
         for t in workers:
             t.start()
             time.sleep(0.02)

@@ -48,6 +48,7 @@ def worker_main(settings: Settings, parent: int, poll: float = 0.2) -> None:
     from engine.settings import use
 
     _die_with(parent)
+    os.nice(5)  # the API's answers first: a try-on is minutes of CPU, a request milliseconds
     signal.signal(signal.SIGTERM, lambda *_: STOP.set())
     use(settings)
     db = DB(settings.db)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import asyncio
 import multiprocessing as mp
+import os
 import resource
 import signal
 import threading
@@ -56,6 +57,7 @@ def _child(conn, fn, args, settings, limits: Limits) -> None:
     from engine.errors import TryonError
     from engine.settings import use
 
+    os.nice(5)  # the API's answers first
     cpu = max(1, int(limits.seconds))
     resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 1))
     cap = _vm_size() + limits.memory_mb * 2 ** 20
