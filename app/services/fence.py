@@ -95,6 +95,7 @@ async def fenced(fn, *args, settings, limits: Limits, what: str = "the file"):
     p = ctx.Process(target=_child, args=(send, fn, args, settings, limits), daemon=True)
     await asyncio.get_running_loop().run_in_executor(None, p.start)  # the forkserver's start may block
     send.close()  # the child holds the write end: its death reads as end-of-file
+    kind, value = "time", ""  # also when the request is dropped while it waits: the child is killed
     try:
         ok = await _wait_readable(recv.fileno(), limits.seconds + 1)
         try:
@@ -102,6 +103,8 @@ async def fenced(fn, *args, settings, limits: Limits, what: str = "the file"):
         except (EOFError, OSError):
             kind, value = "died", ""
     finally:
+        if kind != "time":  # it answered, or its pipe closed: let it end by itself first
+            await asyncio.get_running_loop().run_in_executor(None, p.join, 2)
         if p.is_alive():
             p.kill()
         await asyncio.get_running_loop().run_in_executor(None, p.join, 5)
@@ -114,13 +117,13 @@ async def fenced(fn, *args, settings, limits: Limits, what: str = "the file"):
 def _refusal(kind: str, value: str, exitcode, limits: Limits, what: str) -> tuple[int, str]:
     if kind == "input":
         return 400, value
+    if kind == "bug":
+        return 400, f"{what} could not be read ({value}): check the file"
     if kind == "memory" or (kind == "died" and exitcode in (-signal.SIGSEGV, -signal.SIGABRT, -signal.SIGBUS)):
         return 413, (f"{what} needs more than {limits.memory_mb} MB to read (or broke the reader): "
                      "send a smaller or simpler file")
-    if kind == "time" or exitcode in (-signal.SIGXCPU, -signal.SIGKILL):
+    if kind == "time" or exitcode == -signal.SIGXCPU:
         return 400, f"{what} took longer than {limits.seconds:g} s to read: send a smaller or simpler file"
-    if kind == "bug":
-        return 400, f"{what} could not be read ({value}): check the file"
     return 400, f"{what} could not be read (the reader stopped, exit code {exitcode}): check the file"
 
 

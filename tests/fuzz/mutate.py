@@ -101,7 +101,10 @@ def json_edits(draw, doc):
             n = draw(st.sampled_from([2, 100, 3000]))
             if len(_dumps(parent[path[-1]])) * n < 20_000_000:  # the input, not the mutator, should be big
                 # copies, not n references to one list: a later edit inside must not multiply again
-                parent[path[-1]] = json.loads(_dumps(parent[path[-1]] * n))
+                try:
+                    parent[path[-1]] = json.loads(_dumps(parent[path[-1]] * n))
+                except RecursionError:  # a deep nest from an earlier edit: left as it is
+                    pass
     return doc
 
 
