@@ -4,13 +4,13 @@ non-zero exit (2 for bad input, 3 for no OpenGL, 1 for an internal error)."""
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Optional
 
 import typer
 
 from engine.errors import GLUnavailableError, TryonError
+from engine.settings import EngineSettings, current, read, use
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Virtual try-on: bodies, collision maps, dressing (drape), walking (walk), evidence (bench).")
@@ -28,6 +28,15 @@ def _fail(msg: str, code: int) -> None:
     raise typer.Exit(code)
 
 
+@app.callback()
+def _read_settings() -> None:
+    # the TRYON_* settings (engine/settings.py), read once per command, before anything runs
+    try:
+        use(read(EngineSettings))
+    except TryonError as e:
+        _fail(str(e), 2)
+
+
 def _run(fn):
     """Run a command body; engine errors become a one-line message and an exit code."""
     try:
@@ -41,7 +50,7 @@ def _run(fn):
     except KeyboardInterrupt:
         _fail("interrupted", 130)
     except Exception as e:  # a bug: say so in one line; TRYON_DEBUG=1 shows the traceback
-        if os.environ.get("TRYON_DEBUG"):
+        if current().debug:
             raise
         _fail(f"internal error ({type(e).__name__}: {e}); rerun with TRYON_DEBUG=1 for details", 1)
 

@@ -56,8 +56,9 @@ def _circle_dense(start: np.ndarray, end: np.ndarray, radius: float, large_arc: 
 
 def edge_dense(panel: Panel, edge: Edge, scale: float, relative: bool = True, n: int = _DENSE) -> np.ndarray:
     """(n, 2) points along the edge from its first to its second endpoint (not uniform)."""
-    v = np.asarray(panel.vertices, dtype=np.float64) * scale
-    s, e = v[edge.endpoints[0]], v[edge.endpoints[1]]
+    # the two endpoints only: converting every vertex per edge made a panel's outline O(edges^2)
+    s = np.asarray(panel.vertices[edge.endpoints[0]], dtype=np.float64) * scale
+    e = np.asarray(panel.vertices[edge.endpoints[1]], dtype=np.float64) * scale
     c = edge.curvature
     if c is None:
         return np.stack([s, e])
