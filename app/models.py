@@ -8,6 +8,8 @@ from typing import Literal
 
 from pydantic import BaseModel, Field
 
+from engine.scene.request import TryOnRequest
+
 from app.queue.results import RESULT_FILES, result_dir
 
 
@@ -21,16 +23,11 @@ class DefaultBodyIn(BaseModel):
     age: float | None = None
 
 
-class TryOnIn(BaseModel):
+class TryOnIn(TryOnRequest):
+    """A try-on: the engine's request (what `tryon drape`/`tryon walk` take) on a body of yours."""
+
     body_id: str | None = Field(None, description="a body you created; or give `body`")
     body: str | None = Field(None, description="a default body spec, e.g. default:female,height=1.7")
-    garment: str = Field(..., description="a catalogue name (GET /api/garments) or the id of your pattern")
-    size: str | None = Field(None, description="catalogue size XS..XXL, or auto: the smallest that covers "
-                                                "the body's girths (default M); not for patterns")
-    fabric: str = "cotton"
-    motion: Literal["none", "walk"] = "none"
-    seconds: float = Field(4.0, description="walking time (motion=walk)")
-    resolution_cm: float = Field(1.5, description="cloth edge length, 0.75 .. 4 cm")
 
 
 def body_public(row: dict) -> dict:

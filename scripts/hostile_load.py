@@ -20,7 +20,6 @@ import tempfile
 import threading
 import time
 import zipfile
-import zlib
 from collections import Counter
 from pathlib import Path
 

@@ -5,7 +5,6 @@ and one token's queue from locking others out. Inputs the fuzzer found are regre
 
 from __future__ import annotations
 
-import io
 import json
 import time
 import zipfile

@@ -211,7 +211,6 @@ def _run(req: dict, out: Path, progress, live=None) -> dict:
     else:
         body = resolve_body(b["spec"] if "spec" in b else b["file"])
     g = req["garment"]
-    fabric = req.get("fabric", "cotton")
     walking = req.get("motion", "none") == "walk"
     from app.queue.live_view import LiveView
 
@@ -219,13 +218,13 @@ def _run(req: dict, out: Path, progress, live=None) -> dict:
     try:
         if live is not None:
             live(view.port)
-        return _simulate(req, body, g, fabric, walking, out, progress, view, track)
+        return _simulate(req, body, g, walking, out, progress, view, track)
     finally:
         view.close()
 
 
-def _simulate(req, body, g, fabric, walking, out, progress, view, track=None) -> dict:
-    from engine.scene.request import TryOnRequest
+def _simulate(req, body, g, walking, out, progress, view, track=None) -> dict:
+    from engine.scene.request import TryOnOptions, TryOnRequest
     from engine.scene.tryon import dress_request, write_outputs
 
     retry = [""]  # while --size auto dresses a larger size, every progress message says why
@@ -234,10 +233,11 @@ def _simulate(req, body, g, fabric, walking, out, progress, view, track=None) ->
         retry[0] = f"size {size} came out too small, trying {larger} -- "
 
     catalogue = "name" in g
+    options = {k: req[k] for k in TryOnOptions.model_fields if k in req}  # (as posted: app/services/tryons.py)
+    if track is not None:
+        options["fps"] = track.fps  # an uploaded animation plays at its own rate
     request = TryOnRequest(garment=g["name"] if catalogue else g["file"],
-                           size=(req.get("size") or "M") if catalogue else None, fabric=fabric,
-                           resolution_cm=req.get("resolution_cm", 1.5), motion=req.get("motion", "none"),
-                           seconds=req.get("seconds", 4.0), fps=track.fps if track is not None else 30.0)
+                           size=(req.get("size") or "M") if catalogue else None, **options)
     res, report = dress_request(body, request, progress=lambda stage, f, msg: progress(stage, f, retry[0] + msg),
                                 observer=view, note=note if catalogue else None,
                                 label=None if catalogue else g.get("label"))

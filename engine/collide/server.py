@@ -26,7 +26,6 @@ thread is dead; not while the kernel has not started (its first call may compile
 
 from __future__ import annotations
 
-import os
 import threading
 import time
 import weakref

@@ -32,7 +32,7 @@ import numpy as np
 
 from engine.errors import InputError
 from engine.pattern import geometry as geo
-from engine.pattern.dxf_read import DxfPattern, DxfPiece, Shape, corners_of
+from engine.pattern.dxf_read import DxfPattern, DxfPiece, corners_of
 
 FOLD_TOL = 0.3  # cm: a mirror line within this of the cut line is a fold
 CORNER_DEG = 50.0  # a turn sharper than this is a corner even where the file does not break the line
