@@ -66,6 +66,18 @@ class Sewing:
     vmax: float  # m/s: ... at most this fast
 
 
+@dataclass(frozen=True, eq=False)
+class Attachment:
+    """Vertices held on planes (GarmentCode's attachment: a waistband at the waist while it is
+    sewn; engine.cloth.welds.hold_on_planes)."""
+
+    vertices: np.ndarray  # (K,) int64
+    points: np.ndarray  # (K, 3) a point of each vertex's plane
+    normals: np.ndarray  # (K, 3) unit: the direction the vertex is held along
+    tau: np.ndarray  # (K,) s: a vertex off its plane is brought back in this time ...
+    vmax: np.ndarray  # (K,) m/s: ... at most this fast
+
+
 @dataclass
 class Control:
     """What the scene sets for the next steps."""
@@ -75,3 +87,4 @@ class Control:
     friction_scale: float = 1.0  # x the fabric's cloth-body friction
     collide_every: float = 1  # steps between collision checks (a fraction: that many on average)
     sewing: Sewing | None = None  # seams pulled shut (strain recovery and the strain guard wait meanwhile)
+    attachment: Attachment | None = None  # vertices held on planes

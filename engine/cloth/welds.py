@@ -85,3 +85,19 @@ def pull_seams(x, v, mass, pairs, welded, tau, vmax, contact, contact_n):
             v[end, 0] += px
             v[end, 1] += py
             v[end, 2] += pz
+
+
+@serial_kernel(fastmath=False)
+def hold_on_planes(x, v, idx, points, normals, tau, vmax):
+    """Attachment (GarmentCode's simulator holds some edges while sewing): each vertex idx[k]
+    gets the velocity along normals[k] that brings it to the plane through points[k] in time
+    tau[k] (at most vmax[k]), its velocity along the plane kept."""
+    for k in range(idx.shape[0]):
+        i = idx[k]
+        nx, ny, nz = normals[k, 0], normals[k, 1], normals[k, 2]
+        d = (x[i, 0] - points[k, 0]) * nx + (x[i, 1] - points[k, 1]) * ny + (x[i, 2] - points[k, 2]) * nz
+        want = min(max(-d / tau[k], -vmax[k]), vmax[k])
+        vn = v[i, 0] * nx + v[i, 1] * ny + v[i, 2] * nz
+        v[i, 0] += (want - vn) * nx
+        v[i, 1] += (want - vn) * ny
+        v[i, 2] += (want - vn) * nz

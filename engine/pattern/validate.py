@@ -18,7 +18,7 @@ from engine.pattern import geometry as geo
 from engine.pattern.spec import PatternSpec
 
 MAX_GATHER = 4.0  # a stitched edge at most this many times the length of the edge it is sewn to
-MAX_CROSSINGS = 8  # an outline crossing itself more often than this is not a drawing but a mix-up
+MAX_CROSSINGS = 8  # pairs of edges of an outline that cross: more is not a drawing but a mix-up
 MAX_EDGES = 20_000  # in a whole pattern: garments have hundreds; a large DXF a few thousand
 
 
@@ -115,8 +115,8 @@ def _check_panel(name: str, panel, scale: float, rel: bool) -> list[Problem]:
     if crossing is not None:
         i, j, n = crossing
         if n > MAX_CROSSINGS:
-            out.append(Problem("error", name, i, f"outline crosses itself {n} times (edge {i} crosses edge {j}): "
-                                                 "check the order of its vertices and edges"))
+            out.append(Problem("error", name, i, f"outline crosses itself between {n} pairs of edges (edge {i} "
+                                                 f"crosses edge {j}): check the order of its vertices and edges"))
         else:
             out.append(Problem("warning", name, i, f"outline crosses itself (edge {i} crosses edge {j}): meshed "
                                                    "as GarmentCode draws it, its parts joined where the edges cross"))
@@ -134,7 +134,8 @@ def _self_intersection(poly: np.ndarray, seg_edge: np.ndarray) -> tuple[int, int
     if not len(i):
         return None
     k = np.lexsort((j, i))[0]
-    return int(seg_edge[i[k]]), int(seg_edge[j[k]]), len(i)
+    pairs = len({(int(a), int(b)) for a, b in zip(seg_edge[i], seg_edge[j])})  # (a curve may graze another)
+    return int(seg_edge[i[k]]), int(seg_edge[j[k]]), pairs
 
 
 @parser("a pattern", name_of=lambda spec, source="pattern": source)
