@@ -64,17 +64,22 @@ class Sewing:
     welded: np.ndarray  # (P,) bool: pairs already welded (the scene updates it in place)
     tau: float  # s: an open pair is pulled to close its gap in this time ...
     vmax: float  # m/s: ... at most this fast
+    # a flat layout: each panel's velocities are damped toward the panel's mean velocity at this
+    # rate (1/s), so a panel pulled at its seams moves as a whole instead of folding about its
+    # middle (None: not); panel (N,) int64 the panel of each vertex
+    panel: np.ndarray | None = None
+    panel_damping: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
 class Attachment:
-    """Vertices held on planes (GarmentCode's attachment: a waistband at the waist while it is
-    sewn; engine.cloth.welds.hold_on_planes)."""
+    """Vertices kept in front of planes (GarmentCode's attachment: a waistband kept from sliding
+    down while it is sewn; engine.cloth.welds.hold_on_planes)."""
 
     vertices: np.ndarray  # (K,) int64
     points: np.ndarray  # (K, 3) a point of each vertex's plane
-    normals: np.ndarray  # (K, 3) unit: the direction the vertex is held along
-    tau: np.ndarray  # (K,) s: a vertex off its plane is brought back in this time ...
+    normals: np.ndarray  # (K, 3) unit: the side of the plane the vertex is kept on
+    tau: np.ndarray  # (K,) s: a vertex behind its plane is brought back in this time ...
     vmax: np.ndarray  # (K,) m/s: ... at most this fast
 
 

@@ -181,7 +181,9 @@ def _sew(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSolv
             state, solver = job.fresh_state(), job.solver(model)
             job.progress("sewing", 0.0, f"the seams stopped closing: sewing again, pulled at {vmax:g} m/s")
         control = Control(friction_scale=t.friction or 0.0, collide_every=_sew_every(job.tuning, dt, vmax),
-                          sewing=Sewing(pairs, np.zeros(len(pairs), dtype=np.bool_), t.tau, vmax),
+                          sewing=Sewing(pairs, np.zeros(len(pairs), dtype=np.bool_), t.tau, vmax,
+                                        panel=garment.panel.astype(np.int64) if far else None,
+                                        panel_damping=t.far_panel_damping),
                           attachment=job.attachment)
         pull = _pull(job, model, state, solver, control, far, retry=attempt + 1 < len(pulls), gap0=gap0)
         if pull.welded.all():
@@ -311,8 +313,8 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
     until the shape stops moving, or the budget ends; a garment left stretched past the fabric's
     threshold + too_tight is refused. Gravity grows from `gravity_from` x g over the rest of the
     ramp. `solver` (of this model and collider) carries its iteration count and timing on.
-    attachment: vertices held on planes (engine.scene.attach).
-    The result's seam fields are zero (no seams are open in a sewn model)."""
+    attachment: vertices kept in front of planes (engine.scene.attach) until the cloth first
+    settles; then it is let go and settles again. The result's seam fields are zero (no seams are open in a sewn model)."""
     t = tuning.drape
     tuning.validate()
     fabric = get_fabric(request.fabric)
@@ -380,8 +382,14 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
             guard_share = sum(guards) / window
             full = gravity_from + (it + 1 - window) * dt / ramp >= 1.0  # the last window at full g
             if max(older, drift) < t.settle_speed and it >= min_it and full:
-                settled = True
-                break
+                if control.attachment is None:
+                    settled = True
+                    break
+                # settled while held: let go (as GarmentCode's simulator does after its first
+                # frames) and settle again free -- a garment too wide to stay up slides down now
+                control.attachment = None
+                snaps.clear()
+                snaps.append(state.x.copy())
     strain = solver.max_strain(state)
     if strain > refuse:
         raise _too_small(state, model, strain, fabric, "after draping it is stretched")
