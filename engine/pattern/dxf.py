@@ -30,7 +30,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from engine.errors import InputError
+from engine.errors import InputError, parser
 from engine.pattern import geometry as geo
 from engine.pattern.dxf_build import build_spec, fit_tol, section_edges
 from engine.pattern.dxf_infer import BAND_ROLES, Inference, Part, Seam, Span, frame_part, hints_of, infer
@@ -160,6 +160,7 @@ class Assembly(BaseModel):
         return any(p.role is not None for p in self.panels.values())
 
 
+@parser("an assembly file (JSON)")
 def load_assembly(path: str | Path) -> Assembly:
     path = Path(path)
     if not path.is_file():
@@ -171,6 +172,7 @@ def load_assembly(path: str | Path) -> Assembly:
     return parse_assembly(data, path.name)
 
 
+@parser("an assembly", name_of=lambda data, source="assembly": source)
 def parse_assembly(data, source: str = "assembly") -> Assembly:
     if isinstance(data, dict) and isinstance(data.get("stitches"), list):  # [panel, edge] pairs allowed
         data["stitches"] = [[{"panel": s[0], "edge": s[1]} if isinstance(s, list) and len(s) == 2 else s
@@ -179,8 +181,14 @@ def parse_assembly(data, source: str = "assembly") -> Assembly:
         return Assembly.model_validate(data)
     except ValidationError as e:
         errs = e.errors()
-        parts = [f"{'.'.join(str(x) for x in err['loc'])}: {err['msg']}" for err in errs[:3]]
+        parts = [f"{'.'.join(_printable(x) for x in err['loc'])}: {err['msg']}" for err in errs[:3]]
         raise InputError(f"{source}: invalid assembly: " + "; ".join(parts)) from None
+
+
+def _printable(key, most: int = 40) -> str:
+    """A key of the user's file as an error names it: one line, not too long."""
+    text = "".join(c if c.isprintable() else "?" for c in str(key))
+    return text if len(text) <= most else text[:most] + "..."
 
 
 # ------------------------------------------------------------------ import
