@@ -207,6 +207,7 @@ class Imported:
     left_out: list[str] = field(default_factory=list)
     kind: str = "pieces"  # top, bottom, pieces (nothing sewn)
     assembly: dict | None = None  # the inferred assembly (None when one was given)
+    fabric: tuple[str, str] | None = None  # (fabric, why) where the pattern suggests one (engine.pattern.dxf_fabric)
     areas: dict[str, tuple[float, float]] = field(default_factory=dict)  # panel -> (its area, its piece's) cm^2
     parts: list[Part] = field(default_factory=list)
     seams: list[Seam] = field(default_factory=list)
@@ -232,7 +233,9 @@ def import_pattern(path: str | Path, size: str | None = None, units: str | None 
     size = pick_size(pattern, size if size is not None else (assembly.size if assembly is not None else None))
     if assembly is not None and not assembly.inferred_kind:
         spec, notes = _placed_import(pattern, size, assembly)
-        return Imported(pattern, size, spec, [""] * len(spec.pattern.stitches), notes)
+        out = Imported(pattern, size, spec, [""] * len(spec.pattern.stitches), notes)
+        _suggest_fabric(out, [])
+        return out
     if assembly is not None:
         parts = [_part_of(pattern, size, name, pa) for name, pa in assembly.panels.items()]
         seams = [_seam_of(parts, sa) for sa in assembly.seams]
@@ -251,7 +254,27 @@ def import_pattern(path: str | Path, size: str | None = None, units: str | None 
             out.parts, out.seams = inf.parts, inf.seams
         parts = inf.parts
     out.areas = _areas(out.spec, parts, pattern, size)
+    _suggest_fabric(out, parts)
     return out
+
+
+def _suggest_fabric(imp: Imported, parts: list[Part]) -> None:
+    """The fabric the pattern's pieces say it is made of, as the spec's own fabric, where the
+    assembly names none (engine.pattern.dxf_fabric); said in the notes."""
+    from engine.pattern.dxf_fabric import suggest_fabric
+    from engine.pattern.spec import TryonExtension
+
+    spec = imp.spec
+    if spec.tryon is not None and spec.tryon.fabric:
+        return
+    found = suggest_fabric(imp.pattern, parts)
+    if found is None:
+        return
+    imp.fabric = found
+    if imp.assembly is not None:  # (the inferred assembly a user corrects: the fabric is theirs to change)
+        imp.assembly["tryon"] = {"fabric": found[0]}
+    spec.tryon = (spec.tryon or TryonExtension()).model_copy(update={"fabric": found[0], "fabric_why": found[1]})
+    imp.notes.append(f"fabric: {found[0]}, because {found[1]} (a fabric you choose wins)")
 
 
 def import_dxf(path: str | Path, assembly: Assembly | None = None, units: str | None = None,
@@ -455,6 +478,8 @@ def summary(pattern: DxfPattern, imported: Imported | None = None) -> dict:
                           "panels": list(imported.spec.pattern.panels),
                           "seams": sorted(set(imported.labels) - {""}), "stitches": len(imported.spec.pattern.stitches),
                           "notes": imported.notes, "unsure": imported.unsure, "left_out": imported.left_out,
+                          "fabric": ({"name": imported.fabric[0], "why": imported.fabric[1]} if imported.fabric
+                                     else None),
                           "area_vs_cut_line_pct": {n: round(100 * (a / f - 1), 3) for n, (a, f) in
                                                    imported.areas.items()}}
     return out
