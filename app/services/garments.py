@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import shutil
-from contextlib import contextmanager
 from pathlib import Path
 
 from fastapi import HTTPException, UploadFile
@@ -50,7 +49,8 @@ async def upload_pattern(file: UploadFile, assembly: UploadFile | None, units: s
     name = Path(source).stem[:80]
     if suffix == ".dxf":
         folder = ctx.settings.data_dir / "uploads" / f"garment-{gid}"
-        with _kept_only_if_stored(folder):
+        folder.mkdir(parents=True)
+        with kept_only_if_stored(folder):
             await save_upload(file, folder / DXF_FILE, cap)
             asm = folder / ASSEMBLY_FILE if given else None
             if asm is not None:
@@ -64,17 +64,6 @@ async def upload_pattern(file: UploadFile, assembly: UploadFile | None, units: s
         await save_upload(file, dest, cap)
         info = await ctx.read(read_pattern, dest, source, what=source, ours=dest.name)
         return crud.create_garment(ctx.db, gid, ctx.who, str(dest), name, info)
-
-
-@contextmanager
-def _kept_only_if_stored(folder: Path):
-    """The folder is removed if anything inside fails (a refusal, a full disk, a bug)."""
-    try:
-        folder.mkdir(parents=True)
-        yield
-    except BaseException:
-        shutil.rmtree(folder, ignore_errors=True)
-        raise
 
 
 def is_dxf(row: dict) -> bool:
