@@ -545,3 +545,19 @@ def test_drape_takes_a_dxf_assembly_and_units_and_refuses_them_for_other_pattern
         r = CliRunner().invoke(app, ["drape", "--body", "default:female", "--garment", garment, "--assembly",
                                      str(tmp_path / "a.json"), "--out", str(tmp_path / "out")])
         assert r.exit_code == 2 and "go with a DXF pattern" in r.output, r.output
+
+
+def test_an_assembly_past_a_garments_size_is_refused_at_once(tmp_path):
+    """An assembly with thousands of panels (copies of a piece) or stitches is no garment: refused
+    when read, before anything is built (building and checking them takes seconds)."""
+    from engine.pattern.dxf import MAX_PANELS, MAX_STITCHES
+
+    spec = load_pattern(SAMPLE_SKIRT)
+    asm = assembly_of(spec)
+    first = next(iter(asm["panels"]))
+    many = dict(asm, panels={**asm["panels"], **{f"copy{k}": {"copy_of": first} for k in range(MAX_PANELS)}})
+    with pytest.raises(InputError, match="panels: Dictionary should have at most 200"):
+        parse_assembly(many, "a.json")
+    with pytest.raises(InputError, match="stitches: List should have at most"):
+        parse_assembly(dict(asm, stitches=asm["stitches"] * (MAX_STITCHES // len(asm["stitches"]) + 1)), "a.json")
+    assert parse_assembly(asm, "a.json").panels.keys() == asm["panels"].keys()

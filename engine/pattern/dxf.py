@@ -144,13 +144,18 @@ class SeamAssembly(BaseModel):
     b: SpanAssembly
 
 
+# an assembly's size: a garment has a few dozen pieces and a few hundred stitches at most (the
+# samples: 17 pieces, 44 stitches, 18 seams); a file past these is no garment and takes seconds to check
+MAX_PANELS, MAX_SEAMS, MAX_STITCHES = 200, 1000, 5000
+
+
 class Assembly(BaseModel):
     """The assembly file: what a DXF does not hold."""
 
     model_config = ConfigDict(extra="forbid")
-    panels: dict[str, PanelAssembly] = Field(default_factory=dict)
-    seams: list[SeamAssembly] = Field(default_factory=list)  # the inferred kind
-    stitches: list[tuple[StitchSide, StitchSide]] = Field(default_factory=list)  # GarmentCode's kind
+    panels: dict[str, PanelAssembly] = Field(default_factory=dict, max_length=MAX_PANELS)
+    seams: list[SeamAssembly] = Field(default_factory=list, max_length=MAX_SEAMS)  # the inferred kind
+    stitches: list[tuple[StitchSide, StitchSide]] = Field(default_factory=list, max_length=MAX_STITCHES)  # GarmentCode's
     panel_order: list[str] | None = None  # the order the panels are meshed in (default: the DXF's, then copies)
     tryon: TryonExtension | None = None
     size: str | None = None  # the size it was inferred in (any size of the pattern takes it)
