@@ -10,6 +10,8 @@ SAMPLE_SKIRT = SAMPLES / "flare_skirt_specification.json"
 DXF_SAMPLES = ROOT.parent / "shared" / "samples" / "dxf"  # real pattern-CAD exports (their README)
 # GarmentCode's own T-shirt (tests/garmentcode/README.md): a sleeved pattern file
 GC_SHIRT = ROOT / "tests" / "garmentcode" / "shirt_mean_specification.json"
+# an SMPL body (another body model) of about the mean body's girths, from GarmentCode's assets
+SMPL_BODY = ROOT.parent / "shared" / "garmentcode" / "assets" / "bodies" / "f_smpl_average_A40.obj"
 
 
 def write_anim_zip(path, frames, faces, names=None):

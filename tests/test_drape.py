@@ -7,6 +7,7 @@ measured exactly against the body mesh max <= 3 mm and p99 <= 1 mm, strain max <
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ from typer.testing import CliRunner
 from engine.cli import app
 from engine.scene.request import TryOnOptions
 from engine.scene.tuning import DrapeTuning, SewTuning, Tuning
-from tests.samples import GC_SHIRT, SAMPLE_BODY, SAMPLE_SKIRT, write_arms_lowered_scan
+from tests.samples import GC_SHIRT, SAMPLE_BODY, SAMPLE_SKIRT, SMPL_BODY, write_arms_lowered_scan
 
 pytestmark = pytest.mark.integration  # (dresses, walks, or runs the service)
 
@@ -320,11 +321,14 @@ def test_a_garmentcode_t_shirt_dresses_a_body_it_was_not_made_for(tmp_path, scan
     assert rep["seam_gap_mm"]["snapped"] == 0
 
 
-@pytest.mark.parametrize("body_arg, carried", [("default:female", True), (str(SAMPLE_BODY), False)])
-def test_a_carried_pattern_whose_seams_stay_open_says_the_placement_may_be_why(body_arg, carried):
+@pytest.mark.parametrize("body_arg, says", [(str(SMPL_BODY), "carried"), (str(SAMPLE_BODY), None),
+                                             ("default:female", "another body")])
+def test_a_carried_pattern_whose_seams_stay_open_says_the_placement_may_be_why(body_arg, says):
     """Sewing that fails (here: a sewing budget far too short to close the sample skirt's seams)
-    on a body the pattern was not made for says that its placement was carried from
-    GarmentCode's mean body, and what to do; on its own body it does not."""
+    on a body the pattern was not made for (an SMPL body of about the same girths) says that its
+    placement was carried from GarmentCode's mean body, and what to do; on a body of other girths
+    (the default female's bust is 12 cm smaller), first that the pattern is for another body, both
+    bodies' girths named; on its own body neither."""
     from engine.body import resolve_body
     from engine.errors import SimulationError
     from engine.garment.place import CARRIED_HINT
@@ -335,8 +339,13 @@ def test_a_carried_pattern_whose_seams_stay_open_says_the_placement_may_be_why(b
     with pytest.raises(SimulationError) as e:
         run_tryon(body, load_pattern(SAMPLE_SKIRT), TryOnOptions(resolution_cm=5.0),
                   Tuning(sew=SewTuning(budget=0.01, far_retry_vmax=0.0)))
-    assert "did not close" in str(e.value)
-    assert (CARRIED_HINT in str(e.value)) == carried
+    msg = str(e.value)
+    assert "did not close" in msg
+    assert (CARRIED_HINT in msg) == (says == "carried")
+    assert msg.startswith("this pattern is for another body") == (says == "another body")
+    if says == "another body":
+        assert re.search(r"mean body \(bust \d+, waist \d+, hips \d+ cm\), and this body's are bust \d+, "
+                         r"waist \d+, hips \d+ cm", msg), msg
 
 
 def test_a_garment_that_falls_off_the_body_is_refused():

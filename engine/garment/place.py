@@ -514,6 +514,8 @@ def wrap_trousers(uv: np.ndarray, side: str, leg: int, top_y: float, crotch_y: f
 GARMENTCODE_LANDMARKS = (("knee_height", 0.410), ("crotch_height", 0.758), ("hip_height", 0.805),
                          ("waist_height", 1.080), ("bust_height", 1.185), ("shoulder_height", 1.370),
                          ("height", 1.662))
+# ... and its girths (bust, waist, hips, m), measured the same way
+GARMENTCODE_GIRTHS = (("bust", 0.975), ("waist", 0.798), ("hips", 1.049))
 SAME_BODY = 0.01  # m: landmarks all this close to the reference's: the body the pattern was made for
 # The same body's arms (engine.body.fit.fit_rig on the sample scan, engine.pattern.catalogue's arm
 # joints): side -> (shoulder, elbow) joint, world metres. They hang 50 degrees from the vertical;

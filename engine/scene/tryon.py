@@ -16,7 +16,7 @@ import numpy as np
 
 from engine.body.types import SEGMENTS, Body
 from engine.cloth.fabrics import get_fabric
-from engine.errors import InputError, SimulationError
+from engine.errors import InputError, SimulationError, TryonError
 from engine.garment.garment import Garment, build_garment
 from engine.pattern.spec import PatternSpec
 from engine.scene.drape import DrapeResult, Progress, most_stretched, sew_and_drape
@@ -122,7 +122,7 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     try:
         res = sew_and_drape(garment, collider, request, tuning, progress, observer=observer, attachment=held)
     except SimulationError as e:
-        _carried_hint(e, placement_note)
+        _carried_hint(e, placement_note, body)
         raise
     finally:
         collider.release()  # (the map collider's query helper thread)
@@ -223,17 +223,37 @@ def _slid(body: Body, res: DrapeResult, shift: dict, placement_note: str | None)
         "it is too large for this body, or its seams did not close around it; try a smaller size, or "
         "check the pattern's panels")
     err.positions, err.triangles = res.positions.copy(), res.triangles  # for a picture
-    _carried_hint(err, placement_note, slid=True)
+    _carried_hint(err, placement_note, body, slid=True)
     return err
 
 
-def _carried_hint(err: Exception, placement_note: str | None, slid: bool = False) -> None:
+def _carried_hint(err: Exception, placement_note: str | None, body: Body, slid: bool = False) -> None:
     """A GarmentCode pattern carried onto another body by its landmarks (pattern_placement) whose
-    seams did not close, or that slid down the body: say that the placement may be why."""
-    from engine.garment.place import CARRIED, CARRIED_HINT
+    seams did not close, or that slid down the body: on a body whose girths differ from the mean
+    body's by more than OTHER_BODY the error starts by saying the pattern is for another body,
+    both bodies' girths named; else it adds that the placement may be why."""
+    from engine.body.measure import measure
+    from engine.garment.place import CARRIED, CARRIED_HINT, GARMENTCODE_GIRTHS
 
-    if placement_note == CARRIED and (slid or getattr(err, "open_top", None) is not None):
+    if placement_note != CARRIED or not (slid or getattr(err, "open_top", None) is not None):
+        return
+    try:
+        m = measure(body)
+        mine = {k: getattr(m, k) for k, _ in GARMENTCODE_GIRTHS}
+    except TryonError:
+        mine = {}
+    if mine and max(abs(mine[k] - ref) for k, ref in GARMENTCODE_GIRTHS) > OTHER_BODY:
+        def girths(g):
+            return ", ".join(f"{k} {100 * v:.0f}" for k, v in g) + " cm"
+
+        err.args = (f"this pattern is for another body: GarmentCode laid it out round its mean body "
+                    f"({girths(GARMENTCODE_GIRTHS)}), and this body's are {girths(mine.items())} -- make the "
+                    f"pattern in GarmentCode for this body's measurements ({err})",) + tuple(err.args[1:])
+    else:
         err.args = (f"{err}. {CARRIED_HINT}",) + tuple(err.args[1:])
+
+
+OTHER_BODY = 0.08  # m: a girth this far from the mean body's: the pattern is for another body
 
 
 # x the fabric's friction while sewing on a body whose arms hang closer to its torso than
