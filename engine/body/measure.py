@@ -231,6 +231,11 @@ class Measurements:
 
 STEP = 0.005  # m between profile cuts; landmarks are then refined by bisection
 ARMPIT_CUTS = 3  # the armpits: where the torso cut widens by a quarter within this many cuts up
+# ... and below that, cuts still narrowing faster than this (m of width per m of height) going
+# down are the fold of skin between a raised arm and the torso, not yet the torso: in a T-pose
+# the cut 2 cm under the widening still reached 30 cm along the arms (default:male, chest 174 cm),
+# while a torso widens towards the armpits at most ~1.4 (default:male: 7 mm a 5 mm cut)
+FOLD_NARROWING = 1.6
 ARM_GAP_BELOW = 0.10  # m below the armpits where Measurements.arm_gap is taken
 ARM_ROOT_BELOW = 0.03  # m below the armpits where Measurements.arm_root is taken
 # The gap from which the seams beside the arms (over the shoulders, under the arms) are sewn
@@ -357,9 +362,9 @@ def _measure(body) -> Measurements:
                        "and then lowered (slower)")
     _torso_girths(prof, h, crotch, armpit, m)
     _knee(prof, h, crotch, m)
-    acromion = _shoulders(v, prof, h, armpit, m)
+    acromion = _shoulders(v, f, prof, h, armpit, m)
     if acromion is not None:
-        _arms(prof, h, armpit, acromion, m)
+        _arms(v, f, prof, armpit, acromion, m)
     return m
 
 
@@ -408,6 +413,11 @@ def _find_armpit(prof: _Profile, h: float, crotch: float, m: Measurements) -> fl
         p = prof.central_piece(prof.cut(y))
         return p is not None and (p.xmax - p.xmin) < thresh
 
+    below = k
+    while below > 0 and width[below] - width[below - 1] > FOLD_NARROWING * STEP:
+        below -= 1
+    if below < k:  # the fold of skin between arm and torso (raised arms): the torso starts under it
+        return float(prof.ys[idx[below]])
     return _bisect(narrow, prof.ys[idx[k]], prof.ys[idx[k + j]])
 
 
@@ -451,63 +461,88 @@ def _arm_root(prof: _Profile, y: float) -> float:
 
 
 def _torso_girths(prof: _Profile, h: float, crotch: float, armpit: float, m: Measurements) -> None:
-    # Bust point: the most forward point of the torso in the chest region -- a peak of the front
-    # profile there, not the region's lower edge, where a belly can stand further forward
-    # (default:male at weight 1: the "bust point" was the belly, at the waist, and the bust,
-    # underbust and every size chosen from them came out n/a)
+    # Bust point: a forward peak of the torso's front profile in the chest region (_front_peak),
+    # not the region's lower edge, nor a belly standing further forward (default:male at weight
+    # 1: the "bust point" was the belly, at the waist, and the bust, underbust and every size
+    # chosen from them came out n/a)
     idx = prof.index_range(armpit - 0.12 * h, armpit - 0.01 * h)
     front = np.array([prof.central[i].points[:, 1].max() if prof.central[i] is not None else -np.inf
                       for i in idx])
-    i_apex = idx[_front_peak(front)]
+    i_apex = idx[_front_peak(front, int(round(PEAK_BELOW * h / STEP)), int(round(CHEST_UPPER * h / STEP)))]
     m.bust_height = float(prof.ys[i_apex])
 
-    # Waist: narrowest torso girth between the hips and the bust point.
+    # Waist: narrowest torso girth between the hips and the bust point; where the girth only
+    # grows from the hips up to there (a belly: no natural waist) WAIST_SHARE of the way from the
+    # crotch to the armpits, as ISO 8559-1 takes it half way between the ribs and the hip bone
     idx = prof.index_range(crotch + 0.1 * h, m.bust_height)
     g = np.array([prof.girth(i) for i in idx])
-    iw = idx[int(np.nanargmin(g))]
+    k = int(np.nanargmin(g))
+    if k >= len(idx) - 2:
+        k = int(np.argmin(np.abs(prof.ys[idx] - (crotch + WAIST_SHARE * (armpit - crotch)))))
+        m.notes.append("no natural waist (the torso narrows nowhere between the hips and the chest): the waist is "
+                       f"taken {100 * WAIST_SHARE:.0f} % of the way from the crotch to the armpits")
+    iw = idx[k]
     m.waist, m.waist_height = prof.girth(iw), float(prof.ys[iw])
 
     # Underbust: where the steep fall of the girth below the bust ends (knee of the profile:
     # the point farthest below the chord from the waist to the bust point).
     idx = np.arange(iw, i_apex + 1)
+    low = m.bust_height - 0.03 * h
     if len(idx) >= 3:
         g = np.array([prof.girth(i) for i in idx])
         chord = g[0] + (g[-1] - g[0]) * (prof.ys[idx] - prof.ys[idx[0]]) / (prof.ys[idx[-1]] - prof.ys[idx[0]])
         iu = idx[int(np.nanargmax(chord - g))]
         m.underbust = prof.girth(iu)
-        # Bust: largest girth from the underbust to just below the armpits.
-        idx = prof.index_range(prof.ys[iu], armpit - 0.01 * h)
-        g = np.array([prof.girth(i) for i in idx])
+        low = prof.ys[iu]
+    else:
+        m.notes.append("underbust not measured: the chest's front stands at the waist")
+    # Bust (chest): largest girth from the underbust (at most 3 % of the height under the bust
+    # point: not a belly's girth) to just below the armpits.
+    idx = prof.index_range(min(max(low, m.bust_height - 0.03 * h), m.bust_height), armpit - 0.01 * h)
+    g = np.array([prof.girth(i) for i in idx])
+    if np.isfinite(g).any():
         m.bust = float(np.nanmax(g))
 
     # Hips: largest girth between the crotch and the waist; a little below the crotch the
-    # tape goes around both legs (hull of the two leg pieces).
-    best, best_y = -np.inf, np.nan
+    # tape goes around both legs (hull of the two leg pieces). The hip height is that of the
+    # largest girth above the crotch (the seat): on men the thighs' hull under the crotch can be
+    # the largest (default:male: 101.9 cm 5 cm under it, the seat 99.1 cm 4 cm above), and a hip
+    # line under the crotch put the landmarks out of order for everything mapped by them
+    best, best_y, seat, seat_y = -np.inf, np.nan, -np.inf, np.nan
     for i in prof.index_range(crotch - 0.03 * h, m.waist_height):
         if prof.ys[i] >= crotch:
             g = prof.girth(i)
+            if np.isfinite(g) and g > seat:
+                seat, seat_y = g, float(prof.ys[i])
         else:
             legs = _leg_pair(prof, prof.cuts[i])
             g = hull_perimeter(np.vstack([p.points for p in legs])) if legs else np.nan
         if np.isfinite(g) and g > best:
             best, best_y = g, float(prof.ys[i])
     if np.isfinite(best):
-        m.hips, m.hip_height = best, best_y
+        m.hips, m.hip_height = best, (seat_y if np.isfinite(seat_y) else best_y)
 
 
 BUST_PEAK_CUTS = 3  # a bust point stands at least as far forward as the cuts this far above and below
+PEAK_BELOW = 0.04  # x height: ... and PEAK_RISE further forward than every cut this far below it
+PEAK_RISE = 0.003  # m
+CHEST_UPPER = 0.06  # x height under the armpits: where a flat chest's front is looked for
+WAIST_SHARE = 0.58  # the waist's place between crotch and armpits where there is no narrowest girth
+# (measured: default:female 0.60, the sample scan 0.64, default:male 0.53)
 
 
-def _front_peak(front: np.ndarray) -> int:
-    """Index of the most forward peak of a front profile (cuts bottom to top): a cut at least as
-    far forward as its BUST_PEAK_CUTS neighbours on each side, away from both ends; the most
-    forward cut when there is none."""
+def _front_peak(front: np.ndarray, below: int, upper: int) -> int:
+    """Index of the bust point in a front profile (cuts bottom to top): the highest cut at least
+    as far forward as its BUST_PEAK_CUTS neighbours on each side, away from both ends, that
+    stands PEAK_RISE forward of every cut up to `below` cuts under it (the chest, not a belly
+    further down); without one, the most forward of the top `upper` cuts (a flat chest over a
+    belly: default:male at weight 1 and muscle 0 had its "bust" round the belly, 131 cm)."""
     k = BUST_PEAK_CUTS
-    best = -1
-    for j in range(k, len(front) - k):
-        if front[j] >= front[j - k:j + k + 1].max() and (best < 0 or front[j] > front[best]):
-            best = j
-    return best if best >= 0 else int(np.argmax(front))
+    for j in range(len(front) - k - 1, k - 1, -1):
+        if front[j] >= front[j - k:j + k + 1].max() and front[j] - front[max(0, j - below):j].min() >= PEAK_RISE:
+            return j
+    top = max(0, len(front) - upper)
+    return top + int(np.argmax(front[top:]))
 
 
 def _leg_pair(prof: _Profile, pieces: list[Piece]) -> list[Piece] | None:
@@ -538,55 +573,57 @@ def _knee(prof: _Profile, h: float, crotch: float, m: Measurements) -> None:
     m.knee_height = float(prof.ys[idx[i_calf + int(np.nanargmin(sub))]])
 
 
-def _shoulders(v: np.ndarray, prof: _Profile, h: float, armpit: float, m: Measurements):
+def _shoulders(v: np.ndarray, f: np.ndarray, prof: _Profile, h: float, armpit: float, m: Measurements):
     """Acromion points, a heuristic: laterally at the side walls of the torso just below the
     armpits (the torso wall runs up to the acromion; the bend of the shoulder-arm top profile
-    sits on the deltoid, a few cm further out), vertically the top of the body there."""
+    sits on the deltoid, a few cm further out), vertically the top of the body's surface there
+    (a cut by the plane x = wall: the vertices within 5 mm of it, which this took before, were
+    none on a coarse mesh -- 10,000 triangles -- and 2-4 cm below the top on others)."""
     core = prof.central_piece(prof.cut(armpit - 0.005))
     if core is None:
+        m.notes.append("shoulder points not found: no torso cut under the armpits")
         return None
     points = []
     for x in (core.xmin, core.xmax):
-        sel = (np.abs(v[:, 0] - x) < 0.005) & (v[:, 1] >= armpit)
-        if not sel.any():
+        top = _top_at_x(v, f, x, armpit)
+        if top is None:
+            m.notes.append("shoulder points not found: no surface above the armpits at the torso's sides")
             return None
-        top = np.nonzero(sel)[0][int(np.argmax(v[sel, 1]))]
-        points.append(np.array([x, v[top, 1], v[top, 2]]))
+        points.append(top)
     left, right = points
     m.shoulder_width = float(right[0] - left[0])
     m.shoulder_height = float(0.5 * (left[1] + right[1]))
     return left, right
 
 
-def _arms(prof: _Profile, h: float, armpit: float, acromion, m: Measurements) -> None:
-    """Arm length: acromion -> elbow -> wrist, through the centres of the arm cuts. The wrist
-    is the narrowest arm cut in the lower half of the arm, above the hand."""
+def _top_at_x(v: np.ndarray, f: np.ndarray, x: float, y_min: float) -> np.ndarray | None:
+    """(3,) highest point of the surface's cut by the plane x = x that is above y_min (None
+    without one)."""
+    pieces = slice_pieces(v[:, [1, 0, 2]], f, x)  # the cut's points come back as (y, z)
+    pts = np.concatenate([p.points for p in pieces]) if pieces else np.zeros((0, 2))
+    pts = pts[pts[:, 0] >= y_min]
+    if len(pts) == 0:
+        return None
+    k = int(np.argmax(pts[:, 0]))
+    return np.array([x, pts[k, 0], pts[k, 1]])
+
+
+ARM_CUTS_MIN = 8  # an arm is measured from at least this many cuts across it
+
+
+def _arms(v: np.ndarray, f: np.ndarray, prof: _Profile, armpit: float, acromion, m: Measurements) -> None:
+    """Arm length: acromion -> elbow -> wrist, through the centres of the arm's cuts -- cuts
+    across a hanging arm by the horizontal profile, or across an arm held out (T-pose) by
+    planes x = const from the shoulder out. The wrist is the narrowest arm cut in the lower half
+    of the arm, above the hand."""
     lengths = []
     for side, a in zip((-1.0, 1.0), acromion):
-        ys, cents, widths = [], [], []
-        for i in prof.index_range(0.0, armpit - 0.005)[::-1]:  # from the armpit downwards
-            pieces, core = prof.cuts[i], prof.central[i]
-            if core is not None:
-                inner = core.xmax if side > 0 else core.xmin
-            else:
-                legs = _leg_pair(prof, pieces)
-                if legs is None:
-                    break
-                inner = legs[1].xmax if side > 0 else legs[0].xmin
-            arm = [p for p in pieces if side * ((p.xmin if side > 0 else p.xmax) - inner) > 0]
-            if not arm:
-                if ys:
-                    break
-                continue
-            w = np.array([p.length for p in arm])
-            c = (np.array([p.centroid for p in arm]) * w[:, None]).sum(axis=0) / w.sum()
-            ys.append(prof.ys[i])
-            cents.append([c[0], prof.ys[i], c[1]])
-            widths.append(hull_perimeter(np.vstack([p.points for p in arm])))
-        if len(ys) < 8:
+        cents, widths = _hanging_arm(prof, armpit, side)
+        if len(cents) < ARM_CUTS_MIN:
+            cents, widths = _held_out_arm(v, f, a, side)
+        if len(cents) < ARM_CUTS_MIN:
             continue
-        cents, widths = np.array(cents), np.array(widths)
-        n = len(ys)
+        n = len(cents)
         lo, hi = int(0.45 * n), int(0.9 * n)
         iw = lo + int(np.argmin(widths[lo:hi]))
         wrist = cents[iw]
@@ -599,4 +636,54 @@ def _arms(prof: _Profile, h: float, armpit: float, acromion, m: Measurements) ->
     if lengths:
         m.arm_length = float(np.mean(lengths))
     else:
-        m.notes.append("arm length not measured: no hanging arm found below the armpits (T-pose?)")
+        m.notes.append("arm length not measured: no arm found hanging below the armpits nor held out from the "
+                       "shoulders")
+
+
+def _arm_pieces(prof: _Profile, pieces: list[Piece], core: Piece | None, side: float) -> list[Piece]:
+    """The pieces of a cut that belong to the arm on `side` (+1: +x): on that side of the body's
+    axis (by their centre: an arm pressed into the torso overlaps it), neither the torso's piece
+    nor, below the crotch, a leg's."""
+    skip = [core] if core is not None else (_leg_pair(prof, pieces) or [])
+    return [p for p in pieces if all(p is not q for q in skip) and side * (p.centroid[0] - prof.ax) > 0]
+
+
+def _hanging_arm(prof: _Profile, armpit: float, side: float) -> tuple[np.ndarray, np.ndarray]:
+    """(centres (K, 3), hull perimeters (K,)) of the arm's horizontal cuts from the armpit down
+    to where the arm ends."""
+    cents, widths = [], []
+    for i in prof.index_range(0.0, armpit - 0.005)[::-1]:  # from the armpit downwards
+        arm = _arm_pieces(prof, prof.cuts[i], prof.central[i], side)
+        if not arm:
+            if cents:
+                break
+            continue
+        w = np.array([p.length for p in arm])
+        c = (np.array([p.centroid for p in arm]) * w[:, None]).sum(axis=0) / w.sum()
+        cents.append([c[0], prof.ys[i], c[1]])
+        widths.append(hull_perimeter(np.vstack([p.points for p in arm])))
+    return np.array(cents).reshape(-1, 3), np.array(widths)
+
+
+def _held_out_arm(v: np.ndarray, f: np.ndarray, acromion: np.ndarray, side: float) -> tuple[np.ndarray, np.ndarray]:
+    """As _hanging_arm for an arm held out sideways: cuts by the planes x = const every STEP from
+    the acromion outwards, the pieces there above the acromion's height less 25 cm."""
+    xs = acromion[0] + side * np.arange(STEP, 1.2, STEP)
+    order = np.argsort(xs)
+    cuts: list = [None] * len(xs)
+    for k, pieces in zip(order, slice_stack(v[:, [1, 0, 2]], f, xs[order])):  # points come back as (y, z)
+        cuts[k] = pieces
+    cents, widths = [], []
+    for x, pieces in zip(xs, cuts):
+        arm = [p for p in pieces if p.centroid[0] > acromion[1] - 0.25]
+        if not arm:
+            if cents:
+                break
+            continue
+        w = np.array([p.length for p in arm])
+        c = (np.array([p.centroid for p in arm]) * w[:, None]).sum(axis=0) / w.sum()
+        cents.append([x, c[0], c[1]])
+        widths.append(hull_perimeter(np.vstack([p.points for p in arm])))
+    return np.array(cents).reshape(-1, 3), np.array(widths)
+
+

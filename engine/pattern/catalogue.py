@@ -12,11 +12,11 @@ Ease (garment girth minus body girth) after W. Aldrich, "Metric Pattern Cutting 
 Wear", 6th ed. (2015), block tables: fitted skirt waist +2, hips +4; semi-fitted dress bust
 +8, waist +6, hips +6; shirt/blouse bust +10, hips +8; trousers waist +2, hips +6.
 Which chart: the default bodies' own (default:female / default:male); any other body (a scan,
-an uploaded animation) by its waist-to-hip girth ratio, MEN_RATIO or more for the men's chart
-(the charts' own ratios at M are 0.74 and 0.86; measured: default:female 0.68, the sample scan
-0.76, default:male 0.81-0.87 by weight). A file's name does not choose it: the same scan got
-the men's chart as "anim_male.zip" and the women's as the service's "body-<id>.zip", whose
-M skirt could not be sewn around a man's waist.
+an uploaded animation) by the sex its shape reads (engine.body.sex: breasts, waist and ribcage
+against the hips; by the waist-to-hip ratio alone, 0.80 or more for men, a man with a slim
+waist got the women's chart). A file's name does not choose it: the same scan got the men's
+chart as "anim_male.zip" and the women's as the service's "body-<id>.zip", whose M skirt could
+not be sewn around a man's waist.
 Armhole (scye) depth below the shoulder: 0.12 x height for women (Aldrich's women's block,
 21 cm at 164 cm), 0.14 x height for men (his men's blocks, ~24-25 cm at 176 cm: a deeper
 armhole for the thicker arm root; 0.12 measured 22-33 % strain at the male armpit).
@@ -41,7 +41,6 @@ from engine.pattern import geometry as geo
 from engine.pattern.spec import PanelHint, PatternSpec
 
 SIZES = ("XS", "S", "M", "L", "XL", "XXL")
-MEN_RATIO = 0.80  # waist / hips at or above which a body that is not a default one gets the men's chart
 SCYE_WOMEN, SCYE_MEN = 0.12, 0.14  # armhole depth below the shoulder point, x height ...
 # ... or deeper: the armhole's underarm point at least this x Measurements.arm_root below the
 # body's armpit (thick arms). Measured: the sample scan's L sleeveless shirt (arm root 34.2 cm,
@@ -169,12 +168,13 @@ def chart_of(body: Body, m=None) -> str:
     """'women' or 'men': the size chart for this body (module doc)."""
     if body.name.startswith("default:"):
         return "men" if body.name.split(",")[0] == "default:male" else "women"
+    from engine.body.sex import body_sex
+
     if m is None:
         from engine.body.measure import measure
 
         m = measure(body)
-    ratio = m.waist / m.hips
-    return "men" if np.isfinite(ratio) and ratio >= MEN_RATIO else "women"
+    return "men" if body_sex(body, m) == "male" else "women"
 
 
 # the body girths each garment is cut to fit (the others it does not reach, or hangs free of)
