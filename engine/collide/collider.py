@@ -7,6 +7,7 @@ from collections import namedtuple
 
 import numpy as np
 
+from engine.collide.base import Collider
 from engine.collide.maps import CollisionMaps
 from engine.collide.query import query_point_into, query_batch_serial, query_rows_serial
 from engine.collide.server import (HELP_WAIT, SpinServer, StallWatch, after_help, chunk_done, claim, helper_default,
@@ -59,12 +60,13 @@ def alloc_answers(collider, n: int) -> None:
     collider._n = n
 
 
-class MapCollider:
+class MapCollider(Collider):
     """Cloth points against CollisionMaps (vertex and face-midpoint checks, seed 003 §5.3).
     Output arrays are reused between calls (one call per simulation step); set_maps() swaps
     in a new body frame's maps (walking)."""
 
     depth_along_z = True  # depth is measured along z (query.py), not along the normal
+    answers_rows = True
 
     def __init__(self, maps: CollisionMaps, tol: float | None = None, helper: bool | None = None):
         """helper: a query of many rows is shared with a helper thread (query_rows); None: unless

@@ -81,6 +81,7 @@ import numpy as np
 
 from engine.body.motion import BodyTrack
 from engine.body.types import Body
+from engine.collide.base import Collider
 from engine.collide.collider import alloc_answers
 from engine.collide.gl import drop_thread_context
 from engine.collide.maps import CollisionMaps, MapRenderer
@@ -278,10 +279,12 @@ def _expanded(half: np.ndarray, out: np.ndarray | None) -> np.ndarray:
     return out
 
 
-class TrackCollider:
+class TrackCollider(Collider):
     """Cloth points against a BodyTrack, through per-frame collision maps."""
 
     solver_carries = False  # the body moves every step; it carries answers itself (_query_cached)
+    prefetches = True
+    makes_face_points = True
 
     def __init__(self, track: BodyTrack, renderer, tol: float, keep: bool = True,
                  compact: bool = True, ahead: bool = False, helper: bool | None = None):
@@ -639,7 +642,7 @@ def _shift_answers(status, depth, normal, velocity, root_v, shift_t, tol):
         status[i] = 2 if d > tol else (1 if d > 0.0 else 0)
 
 
-class TrackObjectCollider:
+class TrackObjectCollider(Collider):
     """The object-space baseline on a moving body: the BVH over the body triangles is refitted
     to the nearest frame (relative to the root, like the maps), points move into the root's
     frame, and the surface between frames moves along its velocity as in TrackCollider."""
