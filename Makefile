@@ -41,9 +41,7 @@ bench-peer: setup
 clean:
 	rm -rf out .pytest_cache
 
-# numba's compiled kernels (cached beside the sources, in __pycache__): a cached kernel is checked
-# against its own file only, so after a change to a helper that other files' kernels inline
-# (engine/collide/server.py, engine/cloth/kernels.py, engine/collide/query.py, engine/jit.py)
-# delete them; the next run compiles them again (a minute or two).
+# numba's compiled kernels (cached beside the sources, in __pycache__, keyed by the text of each
+# kernel file and the kernel files it imports: engine/jit.py): delete them to compile afresh.
 clean-kernels:
 	find engine -path '*/__pycache__/*' \( -name '*.nbi' -o -name '*.nbc' \) -delete

@@ -57,14 +57,16 @@ def warm_up() -> dict:
     t0 = time.perf_counter()
     try:
         from engine.body import resolve_body
-        from engine.scene.drape import DrapeOptions
         from engine.scene.garments import resolve_garment
+        from engine.scene.request import TryOnOptions
         from engine.scene.tryon import run_tryon
+        from engine.scene.tuning import DrapeTuning, SewTuning, Tuning
 
         body = resolve_body("default:female")
         spec, place, label = resolve_garment("skirt", body, "M")
-        run_tryon(body, spec, h=0.04, place=place, source=label,
-                  options=DrapeOptions(sew_budget=0.05, drape_budget=0.05))
+        run_tryon(body, spec, TryOnOptions(resolution_cm=4.0), Tuning(sew=SewTuning(budget=0.05),
+                                                                      drape=DrapeTuning(budget=0.05)),
+                  place=place, source=label)
         ok = True
     except Exception:  # noqa: BLE001 -- an optimisation only: never stop the worker
         traceback.print_exc()
@@ -142,37 +144,30 @@ def _run(req: dict, out: Path, progress, live=None) -> dict:
 
 
 def _simulate(req, body, g, fabric, walking, out, progress, view, track=None) -> dict:
-    from engine.scene.drape import DrapeOptions
-    from engine.scene.garments import dress_in_size
-    from engine.scene.tryon import run_tryon, write_outputs
+    from engine.scene.request import TryOnRequest
+    from engine.scene.tryon import dress_request, write_outputs
 
     retry = [""]  # while --size auto dresses a larger size, every progress message says why
-
-    def dress(spec, place, name, **kw):
-        return run_tryon(body, spec, fabric=fabric, h=req.get("resolution_cm", 1.5) / 100.0,
-                         options=DrapeOptions(fabric=fabric), place=place,
-                         source=name if "name" in g else g.get("label", name),
-                         progress=lambda stage, f, msg: progress(stage, f, retry[0] + msg), observer=view, **kw)
 
     def note(size, why, larger):
         retry[0] = f"size {size} came out too small, trying {larger} -- "
 
-    if "name" in g:
-        res, report = dress_in_size(g["name"], body, req.get("size") or "M", dress, note=note)
-    else:
-        res, report = dress_in_size(g["file"], body, None, dress)
+    catalogue = "name" in g
+    request = TryOnRequest(garment=g["name"] if catalogue else g["file"],
+                           size=(req.get("size") or "M") if catalogue else None, fabric=fabric,
+                           resolution_cm=req.get("resolution_cm", 1.5), motion=req.get("motion", "none"),
+                           seconds=req.get("seconds", 4.0), fps=track.fps if track is not None else 30.0)
+    res, report = dress_request(body, request, progress=lambda stage, f, msg: progress(stage, f, retry[0] + msg),
+                                observer=view, note=note if catalogue else None,
+                                label=None if catalogue else g.get("label"))
     out.mkdir(parents=True, exist_ok=True)
     write_outputs(out, body, res, report, size=500)
     if walking:
-        from engine.scene.walk import WalkOptions, walk_cloth, walk_report, walking_body, write_walk_outputs
+        from engine.scene.walk import walk_cloth, walk_report, walking_body, write_walk_outputs
 
         # an uploaded animation moves as uploaded; a scan walks with the default skeleton fitted to it
         walker = body if track is not None else walking_body(body)
-        wo = WalkOptions(seconds=req.get("seconds", 4.0))
-        if track is not None:
-            wo.fps = track.fps  # the upload's own rate
-        w = walk_cloth(walker, res, wo, texel=0.005, tol=res.model.params.tolerance, progress=progress,
-                       observer=view, track=track)
+        w = walk_cloth(walker, res, request, progress=progress, observer=view, track=track)
         report = walk_report(report, w.report)
         write_walk_outputs(out, walker, w, report)
     view.save(out / "recording.viser")

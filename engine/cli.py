@@ -166,38 +166,19 @@ def drape_cmd(
     front/side/back.png, report.json and the pattern dressed (pattern.json, pattern.svg)."""
 
     def go():
-        from dataclasses import replace
-
-        from engine.cloth.model import ClothParams
         from engine.errors import SimulationError
-        from engine.scene.drape import DrapeOptions
-        from engine.scene.garments import dress_in_size
-        from engine.scene.tryon import run_tryon, write_outputs
+        from engine.scene.request import TryOnRequest
+        from engine.scene.tryon import dress_request, write_outputs
 
+        request = TryOnRequest.of(garment=garment, size=size, fabric=fabric, resolution_cm=resolution, texel_mm=texel,
+                                  collision=collision, dt_ms=dt, force_dt=force_dt, velocity_mode=velocity_mode)
         b = _body(body, up, front)
-        params = replace(ClothParams(), velocity_mode=velocity_mode)
-        opts = DrapeOptions(fabric=fabric, dt=None if dt is None else dt / 1000.0, force_dt=force_dt,
-                            params=params)
         prog, update = _progress_printer()
-
-        def dress(spec, place, name, **kw):
-            return run_tryon(b, spec, fabric=fabric, h=resolution / 100.0, texel=texel / 1000.0,
-                             collision=collision, options=opts, place=place, source=name, progress=update, **kw)
-
         with prog:
             try:
-                res, report = dress_in_size(garment, b, size, dress, note=_size_note)
+                res, report = dress_request(b, request, progress=update, note=_size_note)
             except SimulationError as e:
-                if getattr(e, "positions", None) is not None:
-                    from PIL import Image
-
-                    from engine.io.render import BODY_RGB, render_meshes
-
-                    out.mkdir(parents=True, exist_ok=True)
-                    img = render_meshes([(b.vertices, b.faces, BODY_RGB), (e.positions, e.triangles, (0.8, 0.3, 0.3))],
-                                        size=600, view="three")
-                    Image.fromarray(img).save(out / "failed.png")
-                    typer.echo(f"note: picture of the failed state: {out / 'failed.png'}", err=True)
+                _failed_picture(out, b, e)
                 raise
         for p in write_outputs(out, b, res, report):
             typer.echo(str(p))
@@ -211,6 +192,21 @@ def drape_cmd(
             typer.echo(f"warning: {w}", err=True)
 
     _run(go)
+
+
+def _failed_picture(out: Path, b, e) -> None:
+    """A picture of the state a failed drape stopped in (failed.png), when the error carries it."""
+    if getattr(e, "positions", None) is None:
+        return
+    from PIL import Image
+
+    from engine.io.render import BODY_RGB, render_meshes
+
+    out.mkdir(parents=True, exist_ok=True)
+    img = render_meshes([(b.vertices, b.faces, BODY_RGB), (e.positions, e.triangles, (0.8, 0.3, 0.3))],
+                        size=600, view="three")
+    Image.fromarray(img).save(out / "failed.png")
+    typer.echo(f"note: picture of the failed state: {out / 'failed.png'}", err=True)
 
 
 @app.command("walk")
@@ -247,16 +243,14 @@ def walk_cmd(
     sampled at --fps; the garment is dressed on its first frame."""
 
     def go():
-        from engine.body.motion import WalkParams
-        from engine.scene.drape import DrapeOptions
-        from engine.scene.garments import dress_in_size
-        from engine.scene.tryon import run_tryon, write_pattern
-        from engine.scene.walk import WalkOptions, walk_cloth, walk_report, walking_body, write_walk_outputs
+        from engine.scene.request import TryOnRequest
+        from engine.scene.tryon import dress_request, write_pattern
+        from engine.scene.walk import walk_cloth, walk_report, walking_body, write_walk_outputs
 
-        wo = WalkOptions(seconds=seconds, fps=fps, reuse_maps=reuse_maps, velocity_mode=velocity_mode,
-                         collision=collision, stiffness=stiffness,
-                         walk=WalkParams(speed=speed, stride=stride, in_place=in_place))
-        wo.validate()  # refuse before dressing
+        request = TryOnRequest.of(garment=garment, size=size, fabric=fabric, resolution_cm=resolution, texel_mm=texel,
+                                  collision=collision, velocity_mode=velocity_mode, motion="walk", seconds=seconds,
+                                  fps=fps, speed=speed, stride=stride, in_place=in_place, walk_stiffness=stiffness,
+                                  reuse_maps=reuse_maps)
         track = None
         from engine.body.gltf_anim import has_animation
 
@@ -273,17 +267,10 @@ def walk_cmd(
         if walker is not b:  # a scan: the default body's skeleton and weights were fitted to it
             typer.echo(f"note: {walker.notes[-1]}", err=True)
         prog, update = _progress_printer()
-
-        def dress(spec, place, name, **kw):
-            return run_tryon(b, spec, fabric=fabric, h=resolution / 100.0, texel=texel / 1000.0,
-                             collision=collision, options=DrapeOptions(fabric=fabric), place=place,
-                             source=name, progress=update, **kw)
-
         with prog:
-            res, report = dress_in_size(garment, b, size, dress, note=_size_note)
+            res, report = dress_request(b, request, progress=update, note=_size_note)
             # (a scan is dressed as loaded and walks fitted: see engine.scene.walk.walking_body)
-            w = walk_cloth(walker, res, wo, texel=texel / 1000.0, tol=res.model.params.tolerance,
-                           progress=update, track=track)
+            w = walk_cloth(walker, res, request, progress=update, track=track)
         full = walk_report(report, w.report)
         for p in write_walk_outputs(out, walker, w, full) + write_pattern(out, res.spec):
             typer.echo(str(p))

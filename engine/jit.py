@@ -1,25 +1,98 @@
-"""The decorator for serial numba kernels, and atomic array reads and writes for kernels that
-hand work between threads (imports numba only; the bottom of the engine).
+"""The engine's numba decorators (every kernel file takes them from here), and atomic array reads
+and writes for kernels that hand work between threads (imports numba only; the bottom of the engine).
 
 `serial_kernel` compiles with numba's parallel pipeline switched on, although the kernels have
-no prange and run on one thread: measured on numba 0.68 (scripts/bench_kernels.py), the same
-serial loop compiled this way runs 3-9x faster (the velocity modification: ~58 -> ~14 ns a
-spring and pass; a map query near the body: ~430 -> ~50 ns a point) with bit-identical results. A kernel so
-decorated must hold no array expression or np.zeros/np.ones (numba would turn those into
-parallel loops on its thread pool, which stall when another process holds a core): take
-buffers from the caller, or allocate with np.empty and fill in a loop.
+no prange and run on one thread: the same serial loop compiled this way runs several times
+faster, bit for bit (docs/tuning.md, `serial_kernel`). A kernel so decorated must hold no array
+expression or np.zeros/np.ones (numba would turn those into parallel loops on its thread pool,
+which stall when another process holds a core): take buffers from the caller, or allocate with
+np.empty and fill in a loop.
+
+The on-disk cache of an engine kernel is keyed by the text of its file and of every kernel file
+that file imports, directly or not (KernelCacheLocator): a kernel inlines helpers from other
+files, and numba's own key (the defining file's time stamp) would let a kernel compiled against
+an old helper run silently.
 """
 
 from __future__ import annotations
 
+import ast
+import hashlib
 import warnings
+from functools import lru_cache
+from pathlib import Path
 
-from numba import njit
+import numba
+from numba import njit, prange  # noqa: F401  (re-exported: kernel files take numba's decorators from here)
+from numba.core.caching import CacheImpl, InTreeCacheLocator
 from numba.core.errors import NumbaPerformanceWarning
 
 # "parallel=True was specified but no transformation for parallel execution was possible":
 # that is the point here
 warnings.filterwarnings("ignore", category=NumbaPerformanceWarning, message=r"(?s).*parallel=True.*")
+
+ENGINE = Path(__file__).resolve().parent
+
+
+def kernel_sources(root: Path = ENGINE) -> list[Path]:
+    """The engine's files that define numba kernels (they import their decorators from engine.jit)."""
+    return sorted(p for p in root.rglob("*.py")
+                  if p.name == "jit.py" or "from engine.jit import" in p.read_text(encoding="utf-8"))
+
+
+def _imported_files(path: Path, root: Path) -> set[Path]:
+    """The engine files that `path` imports (from engine.x import ..., import engine.x)."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        names = [node.module] if isinstance(node, ast.ImportFrom) and node.module else \
+            [a.name for a in node.names] if isinstance(node, ast.Import) else []
+        for name in names:
+            parts = name.split(".")
+            if parts[0] != "engine":
+                continue
+            base = root.joinpath(*parts[1:])
+            for f in (base.with_suffix(".py"), base / "__init__.py"):
+                if f.is_file():
+                    out.add(f.resolve())
+    return out
+
+
+@lru_cache(maxsize=None)
+def kernel_stamp(path: Path, root: Path = ENGINE) -> str:
+    """The cache key of the kernels in `path`: a hash of its text and of every kernel file it
+    imports, directly or through other kernel files, with numba's version."""
+    kernels = {p.resolve() for p in kernel_sources(root)}
+    seen, todo = set(), [path.resolve()]
+    while todo:
+        f = todo.pop()
+        if f in seen:
+            continue
+        seen.add(f)
+        todo += [g for g in _imported_files(f, root) if g in kernels]
+    h = hashlib.sha256(numba.__version__.encode())
+    for f in sorted(seen):
+        h.update(f.relative_to(root.resolve()).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+class KernelCacheLocator(InTreeCacheLocator):
+    """numba's in-tree cache (beside the source, in __pycache__) for the engine's kernels, stamped
+    with kernel_stamp instead of the defining file's time stamp and size."""
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        try:
+            Path(py_file).resolve().relative_to(ENGINE)
+        except ValueError:
+            return None
+        return super().from_function(py_func, py_file)
+
+    def get_source_stamp(self):
+        return kernel_stamp(Path(self._py_file))
+
+
+if KernelCacheLocator not in CacheImpl._locator_classes:
+    CacheImpl._locator_classes.insert(0, KernelCacheLocator)
 
 
 def serial_kernel(fn=None, *, fastmath: bool = True, error_model: str = "python"):
@@ -35,6 +108,9 @@ def serial_kernel(fn=None, *, fastmath: bool = True, error_model: str = "python"
 from numba import types as _types  # noqa: E402
 from numba.core import cgutils as _cgutils  # noqa: E402
 from numba.extending import intrinsic as _intrinsic  # noqa: E402
+from numba.extending import overload  # noqa: E402, F401  (re-exported)
+
+nbtypes = _types  # (re-exported: numba's types, for overloads)
 
 
 def _item_pointer(context, builder, signature, args):

@@ -42,38 +42,52 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parents[1]
 
-CHILD = r"""
+# Each child runs in its checkout's own engine, whose API may be older: dress(body, spec, edge_cm,
+# place, label) and walk(body, result, seconds) call it either way.
+PRELUDE = r"""
 import hashlib, json, sys, time
 sys.path.insert(0, sys.argv[1])
+from engine.scene.tryon import run_tryon
+from engine.scene.walk import walk_cloth
+try:
+    from engine.scene.request import TryOnOptions
+    def dress(body, spec, cm, place, label):
+        return run_tryon(body, spec, TryOnOptions(resolution_cm=cm), place=place, source=label)
+    def walk(body, res, seconds):
+        return walk_cloth(body, res, TryOnOptions(seconds=seconds))
+except ImportError:  # (the API before engine.scene.request)
+    from engine.scene.walk import WalkOptions
+    def dress(body, spec, cm, place, label):
+        return run_tryon(body, spec, h=cm / 100, place=place, source=label)
+    def walk(body, res, seconds):
+        return walk_cloth(body, res, WalkOptions(seconds=seconds), texel=0.005, tol=res.model.params.tolerance)
+"""
+
+CHILD = PRELUDE + r"""
 from engine.body import resolve_body
 from engine.scene.garments import resolve_garment
-from engine.scene.tryon import run_tryon
 body = resolve_body(sys.argv[2])
 spec, place, label = resolve_garment("skirt", body, "M")
-run_tryon(body, spec, h=0.06, place=place, source=label)
+dress(body, spec, 6.0, place, label)
 spec, place, label = resolve_garment(sys.argv[3], body, sys.argv[4])
 t = time.perf_counter()
-res, rep = run_tryon(body, spec, h=float(sys.argv[5]), place=place, source=label)
+res, rep = dress(body, spec, float(sys.argv[5]), place, label)
 ms = rep["ms_per_iteration"]
 print(json.dumps({"ms_it": ms["total"], "cloth": ms["cloth"], "collision": ms["collision"],
                   "iterations": rep["iterations"], "wall": time.perf_counter() - t,
                   "strain": rep["strain"]["max"], "hash": hashlib.md5(res.positions.tobytes()).hexdigest()[:8]}))
 """
 
-CHILD_WALK = r"""
-import hashlib, json, sys
-sys.path.insert(0, sys.argv[1])
+CHILD_WALK = PRELUDE + r"""
 from engine.body import resolve_body
 from engine.scene.garments import resolve_garment
-from engine.scene.tryon import run_tryon
-from engine.scene.walk import WalkOptions, walk_cloth
 body = resolve_body(sys.argv[2])
 spec, place, label = resolve_garment("skirt", body, "M")
-res, _ = run_tryon(body, spec, h=0.06, place=place, source=label)
-walk_cloth(body, res, WalkOptions(seconds=0.1), texel=0.005, tol=res.model.params.tolerance)
+res, _ = dress(body, spec, 6.0, place, label)
+walk(body, res, 0.1)
 spec, place, label = resolve_garment(sys.argv[3], body, sys.argv[4])
-res, _ = run_tryon(body, spec, h=float(sys.argv[5]), place=place, source=label)
-w = walk_cloth(body, res, WalkOptions(seconds=float(sys.argv[6])), texel=0.005, tol=res.model.params.tolerance)
+res, _ = dress(body, spec, float(sys.argv[5]), place, label)
+w = walk(body, res, float(sys.argv[6]))
 r = w.report
 print(json.dumps({"realtime": r["realtime_factor"], **{k: r["ms_per_frame"][k] for k in ("maps", "cloth", "collision", "total")},
                   "vertices": res.model.n, "pen": r["penetration_mm"]["max"],
@@ -82,15 +96,13 @@ print(json.dumps({"realtime": r["realtime_factor"], **{k: r["ms_per_frame"][k] f
                   "hash": hashlib.md5(w.garment_frames.tobytes()).hexdigest()[:8]}))
 """
 
-CHILD_SETTLE = r"""
-import json, sys, time
-sys.path.insert(0, sys.argv[1])
+CHILD_SETTLE = PRELUDE + r"""
 import numpy as np
 import engine.scene.tryon as T
 from engine.body import resolve_body
 from engine.pattern.io import load_pattern
 from engine.scene.garments import resolve_garment
-seed, h = int(sys.argv[6]), float(sys.argv[5])
+seed, cm = int(sys.argv[6]), float(sys.argv[5])
 build = T.build_garment
 def moved(*a, **k):  # the garment's start positions moved by ~1 nm (seed 0: as placed)
     g = build(*a, **k)
@@ -111,7 +123,7 @@ for b, g in cases:
     else:
         spec, place, label = resolve_garment(g, body, "M")
     t = time.perf_counter()
-    _, rep = T.run_tryon(body, spec, h=h, place=place, source=label)
+    _, rep = dress(body, spec, cm, place, label)
     wall += time.perf_counter() - t
     total += rep["iterations"]
     unsettled += not rep["settled"]
@@ -134,7 +146,7 @@ def run_one(root: Path, args) -> dict:
     else:
         child, extra = CHILD, []
     out = subprocess.run([sys.executable, "-c", child, str(root), args.body, args.garment, args.size,
-                          str(args.edge_cm / 100), *extra], capture_output=True, text=True)
+                          str(args.edge_cm), *extra], capture_output=True, text=True)
     if out.returncode != 0:
         sys.exit(f"{root}: the try-on failed:\n{out.stderr.strip().splitlines()[-1] if out.stderr else ''}")
     return json.loads(out.stdout.strip().splitlines()[-1])

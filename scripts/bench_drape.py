@@ -45,11 +45,12 @@ def resolution_for(spec, place, target: int) -> float:
 
 def run(body, name: str, h: float) -> dict:
     from engine.scene.garments import resolve_garment
+    from engine.scene.request import TryOnOptions
     from engine.scene.tryon import run_tryon
 
     spec, place, label = resolve_garment(name, body, "M")
     t = time.perf_counter()
-    _, rep = run_tryon(body, spec, h=h, place=place, source=label)
+    _, rep = run_tryon(body, spec, TryOnOptions(resolution_cm=100 * h), place=place, source=label)
     rep["wall"] = time.perf_counter() - t
     return rep
 

@@ -44,11 +44,12 @@ def main() -> None:
     from engine.body import resolve_body
     from engine.body.motion import walk_track
     from engine.scene.garments import resolve_garment
+    from engine.scene.request import TryOnOptions
     from engine.scene.tryon import run_tryon
-    from engine.scene.walk import WalkOptions, walk_cloth
+    from engine.scene.walk import walk_cloth
 
     body = resolve_body(a.body)
-    opts = WalkOptions(seconds=a.seconds)
+    opts = TryOnOptions(seconds=a.seconds)
     track = walk_track(body, opts.walk, opts.fps)
     rows = []
     for g in a.garments.split(","):
@@ -60,14 +61,12 @@ def main() -> None:
             sizes.insert(0, resolution_for(spec, place, SEED[g][0]))
         for h in sizes:
             t0 = time.perf_counter()
-            res, rep = run_tryon(body, spec, h=h, place=place, source=label)
+            res, rep = run_tryon(body, spec, TryOnOptions(resolution_cm=100 * h), place=place, source=label)
             t_dress = time.perf_counter() - t0
             if not rows:  # compile the walking kernels first (a cold numba cache), outside the figures
-                walk_cloth(body, res, WalkOptions(seconds=0.1), texel=0.005, tol=res.model.params.tolerance,
-                           track=track)
+                walk_cloth(body, res, TryOnOptions(seconds=0.1), track=track)
             for reuse in (True, False):
-                o = WalkOptions(seconds=a.seconds, reuse_maps=reuse)
-                w = walk_cloth(body, res, o, texel=0.005, tol=res.model.params.tolerance, track=track)
+                w = walk_cloth(body, res, TryOnOptions(seconds=a.seconds, reuse_maps=reuse), track=track)
                 r = w.report
                 rows.append((g, h, rep["cloth_vertices"], reuse, r, t_dress))
                 print(f"{g:6s} h={h * 100:.2f} cm  {rep['cloth_vertices']:5d} v  maps {'reused' if reuse else 'every frame'}: "

@@ -158,3 +158,39 @@ def test_serial_kernel_matches_plain_njit(fn):
             outs.append((hits, vv, c))
         assert outs[0][0] == outs[1][0] and np.allclose(outs[0][1], outs[1][1]) and np.array_equal(outs[0][2], outs[1][2])
         assert outs[0][0] > 0
+
+
+def test_the_kernel_cache_key_covers_the_kernel_files_it_imports(tmp_path):
+    """A kernel inlines helpers from other files: its cache must go stale when a kernel file it
+    imports changes, not only its own (engine.jit.KernelCacheLocator)."""
+    import shutil
+
+    from engine import jit
+
+    root = tmp_path / "engine"
+    shutil.copytree(jit.ENGINE, root, ignore=shutil.ignore_patterns("__pycache__"))
+    names = {p.relative_to(root).as_posix() for p in jit.kernel_sources(root)}
+    assert {"jit.py", "cloth/kernels.py", "collide/server.py", "collide/moving.py", "collide/query.py"} <= names
+    assert "cli.py" not in names  # (no kernels)
+    moving, kernels = root / "collide" / "moving.py", root / "cloth" / "kernels.py"
+    stamp = jit.kernel_stamp.__wrapped__
+    before = {f: stamp(f, root) for f in (moving, kernels)}
+    helper = root / "collide" / "server.py"  # inlined into moving.py's kernels, not into kernels.py's
+    helper.write_text(helper.read_text() + "\n# an edit to an inlined helper's file\n")
+    assert stamp(moving, root) != before[moving]
+    assert stamp(kernels, root) == before[kernels]
+    jit_py = root / "jit.py"  # (both take their decorators from it)
+    jit_py.write_text(jit_py.read_text() + "\n# an edit\n")
+    assert stamp(kernels, root) != before[kernels]
+
+
+def test_engine_kernels_are_cached_under_that_key():
+    from pathlib import Path
+
+    from engine import jit
+
+    assert K.integrate_positions._cache._impl.locator.__class__ is jit.KernelCacheLocator
+    assert K.integrate_positions._cache._impl.locator.get_source_stamp() == jit.kernel_stamp(Path(K.__file__))
+    for p in jit.ENGINE.rglob("*.py"):  # every kernel file takes numba's decorators from engine.jit
+        if p.name != "jit.py":
+            assert "from numba import" not in p.read_text(), p

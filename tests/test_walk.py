@@ -675,14 +675,14 @@ def test_a_dead_query_server_is_an_error_not_a_hang(monkeypatch):
     """A query server whose thread died before taking part answers nothing: the solver's thread
     answers every chunk itself, the same answers. One that died holding a chunk of a query is
     an error once the wait for it ends -- not a hang, not a half answer."""
-    import engine.collide.moving as mv
+    import engine.collide.server as server
     from engine.collide.server import NEXT, REQ, claim_word
     from engine.errors import SimulationError
 
     def broken(*args):
         raise RuntimeError("broken server")
 
-    monkeypatch.setattr(mv, "_serve", broken)
+    monkeypatch.setattr(server, "serve", broken)
     track = _sliding_box_track(1.0)
     col, r = _collider(track)
     ref, r2 = _collider(track)

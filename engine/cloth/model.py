@@ -53,60 +53,13 @@ DAMPING_CAP = 0.25  # a spring's damping is at most this x m / (dt degree): see 
 
 @dataclass(frozen=True)
 class ClothParams:
-    """Simulation parameters that are not fabric properties."""
+    """The cloth's physical parameters that are not fabric properties (docs/tuning.md)."""
 
     stiffness_scale: float = 0.03  # measured stretch and shear stiffness x this (see fabrics.py)
-    damping: float = 0.02  # viscous damping per unit mass, 1/s ... times mass gives C_vd (N.s/m)
-    spring_damping: float = 0.3  # damping along each spring, as a fraction of the spring's critical
-    # damping 2 sqrt(k m) (capped for stability at the step, see _assemble): the seeds' viscous
-    # damping -C_vd v takes 2 % a period off a 1 kHz spring vibration, and explicit Euler has
-    # no damping of its own, so once a contact or the strain limit excites one it rings forever
-    # (measured: a draped skirt still vibrating at a median 0.1 m/s after 4 s, never settling).
-    # 0.3 rather than 0.1: the coarse dress (962 vertices) kept a 10 cm/s jitter at 0.1 and
-    # settled in 5.8k instead of 12.1k iterations; over the bench's six coarse drapes 36.6k
-    # instead of 47.9k, over the slow drape suite 138k instead of 140k, no strain or
-    # penetration lost
+    damping: float = 0.02  # viscous damping per unit mass, 1/s (times mass: the seeds' C_vd, N.s/m)
+    spring_damping: float = 0.3  # damping along each spring, a fraction of its critical damping 2 sqrt(k m)
     reflection: float = 0.0  # C_refl of eq. 12 (0: the cloth does not bounce off the body)
-    tolerance: float = 0.005  # collision tolerance band, metres (seed 003 §5.4)
-    velocity_mode: str = "average"  # zero (seed 003) | average (seed 000 eq. 5) | directional (eq. 6) | provot
-    vm_passes: int = 6  # Gauss-Seidel passes (over the over-elongated springs) per step. They seldom
-    # converge (measured: 11-12 of 12 used), and with the drape's strain guard 6 hold the slow
-    # drape suite's strain (max 5.7 %, limit 6 %) for 12-20 % less time an iteration (dress,
-    # trousers; 4 passes left the dress at 5.9 %)
-    contact_rounds: int = 2  # alternations of strain limit and collision response per step.
-    # Measured (scripts/bench_ab.py --settle 3, the catalogue and the sample skirt at 1.5 cm, start
-    # positions moved by 1 nm): 4 rounds 35.7k iterations (mean), strain max 5.90 %, penetration
-    # max 0.0 mm; 2 rounds 33.9k, 5.91 %, 0.2 mm (p99 0), sharp folds alike, and 0.89 x the time
-    # an iteration (dress, 1.63 cm, 3 interleaved rounds); 1 round 39.6k, 6.06 % (bar: 6 %)
-    collide_every: float = 1  # steps between collision checks (see ClothSolver.step; a fraction:
-    # that many apart on average, ClothSolver._check_now). The drape sets its own per stage
-    # (engine.scene.drape.DrapeOptions.collide_every: sewing every 3 at 1.5 cm, draping every 2);
-    # walking as often as the body's travel asks (engine.scene.walk.WalkOptions)
-    recover: float = 0.002  # s: a spring's excess over the strain limit is worked off over this long
-    push_time: float = 0.02  # s: a checked point in the inner half of the collision band (or inside)
-    # is moved out over about this long (engine.cloth.kernels._respond; the walk sets its own:
-    # engine.scene.walk.WalkOptions.push_time)
-    flexion_every: int = 4  # steps between evaluations of the flexion springs' forces, held in
-    # between (engine.cloth.kernels.eval_forces_and_integrate). They are ~7,500 x softer than the
-    # stretch springs (cotton at 1.5 cm: 0.044 against 327 N/m), so their force changes little in
-    # a few steps of the stretch springs' eq. 4 bound, and they are a third of the springs
-    requery_move: float = 0.001  # m: the maps are asked again once a checked point moved this far ...
-    # (2 mm while sewing only, measured 2026-12-04 on the catalogue's ten drapes in M: sewing asked
-    # 5.3 instead of 9.0 million rows, its wall time -22 %, but the drapes after it took 1.08 x the
-    # iterations, bench_ab --settle 3 at 2 cm -- within that comparison's +-15 % spread, so no
-    # gain could be shown; left at 1 mm)
-    requery_every: int = 8  # ... or after this many steps (between queries the answers are carried)
-    guard_step: float = 0.0003  # m: the strain guard shortens a spring by at most this per pass
-    # (of vm_passes). Projected at once, cloth torn over a body part (a dress sewn without the arm
-    # maps, whose arm root then pushed neighbouring vertices out front and back) jumped 2-3 mm a
-    # step, the compressed neighbours pushed back at up to 9 m/s a step, and the dress blew up into a
-    # heap on one shoulder; with this limit the same drape ended hanging, in 9.8k iterations. In
-    # normal drapes the guard moves a point 0.05 mm a step (99th percentile, the dress); the slow
-    # drape suite: 137k iterations without the limit, 144k with it (single drapes vary +-40 %
-    # with any change: the settle time is chaotic), quality the same
-    strain_guard: float | None = None  # optional: positions of springs past threshold + this are
-    # projected back (Provot) -- off by default: it fights the collision response (measured: jitter
-    # of metres per second and 14 mm penetration on the sample skirt)
+    tolerance: float = 0.005  # m: the collision tolerance band (seed 003 §5.4)
 
 
 @dataclass
@@ -136,6 +89,12 @@ class ClothModel:
     @property
     def n(self) -> int:
         return len(self.mass)
+
+    @cached_property
+    def strain_limited(self) -> np.ndarray:
+        """(S,) bool: the springs the strain limit applies to (flexion springs shorten and
+        lengthen with folds)."""
+        return self.kind != FLEXION
 
     @cached_property
     def runs(self) -> "SpringRuns":
@@ -364,10 +323,6 @@ def build_model(uv: np.ndarray, panel: np.ndarray, lattice: np.ndarray, quads: n
     params = params or ClothParams()
     if params.stiffness_scale <= 0 or not np.isfinite(params.stiffness_scale):
         raise InputError(f"stiffness scale must be positive, got {params.stiffness_scale}")
-    if not (isinstance(params.flexion_every, (int, np.integer)) and 1 <= params.flexion_every <= 16):
-        raise InputError(f"flexion_every {params.flexion_every}: evaluate flexion springs every 1 .. 16 steps")
-    if not 1 <= params.collide_every <= 16:
-        raise InputError(f"collide_every {params.collide_every}: check collisions every 1 .. 16 steps")
     springs, kind = build_springs(uv, panel, lattice, quads, tris)
     a, b = springs[:, 0], springs[:, 1]
     rest = np.linalg.norm(uv[a] - uv[b], axis=1)

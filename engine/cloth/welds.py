@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.cloth.kernels import outward_only
+from engine.cloth.kernels_strain import outward_only
 from engine.jit import serial_kernel
 
 

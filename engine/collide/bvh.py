@@ -33,7 +33,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+
+from engine.collide.base import Collider
+from engine.jit import njit, prange
 
 CLEAR, BAND, INSIDE = 0, 1, 2
 
@@ -696,7 +698,7 @@ class MeshBVH:
         return out
 
 
-class ObjectSpaceCollider:
+class ObjectSpaceCollider(Collider):
     """The image-space maps' query protocol answered exactly from the body mesh.
 
     body_vertices (V, 3) float64, body_faces (F, 3) int, CCW outward, closed; tolerance metres;

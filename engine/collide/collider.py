@@ -3,69 +3,49 @@ velocity, depth past the band's outer edge) answered from image-space collision 
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 
+from engine.collide.base import Collider
 from engine.collide.maps import CollisionMaps
 from engine.collide.query import query_point_into, query_batch_serial, query_rows_serial
-from engine.collide.server import DONE, HELP_WAIT, REQ, RUNNING, SERVER_CHUNKS, SOLVER_CHUNKS, SpinServer, StallWatch, \
-    after_help, chunk_done, claim, helper_default, serve_wait, wait_chunks
-from engine.jit import atomic_load, atomic_store, serial_kernel
-
-# (The kernels below inline engine.collide.server's claim and friends: numba's on-disk cache of a
-# kernel is checked against this file only, so a change there must come with a change here --
-# 2026-12-04: the claim word's layout changed.)
+from engine.collide.server import (HELP_WAIT, SpinServer, StallWatch, after_help, chunk_done, claim, helper_default,
+                                   register_job)
+from engine.jit import serial_kernel
 
 N_ROWS = 4  # the row query server's own word: rows in the request
 ROW_CHUNK = 128  # rows a claim takes
 SHARE_ROWS = 256  # a query of fewer rows is answered by the solver's thread alone (MapCollider.query_rows)
 
+# A row query shared with the query server: the points rows[:ctl[N_ROWS]] against the maps (the
+# eight arrays of CollisionMaps.kernel_args) at tolerance par[0], into the answer arrays
+# (status, surface, penetration, normal, velocity, map_index)
+RowsJob = namedtuple("RowsJob", "par points rows maps answers")
+
 
 @serial_kernel(fastmath=False)
-def _rows_work(ctl, r, tally, par, points, rows, surf, vel, has_vel, kind, side_src, geom, layout, zz,
-               status, surface, penetration, normal, velocity, map_index):
-    """Answer chunks of request r -- the points rows[:ctl[N_ROWS]], ROW_CHUNK a claim, at
-    tolerance par[0] -- until none is left to claim (engine.collide.server.claim); the same
-    arithmetic as query_rows_serial (fastmath off as there), whichever thread answers a chunk."""
+def _rows_work(ctl, r, tally, job):
+    """Answer chunks of request r of a RowsJob, ROW_CHUNK rows a claim, until none is left to
+    claim; the same arithmetic as query_rows_serial (fastmath off as there), whichever thread
+    answers a chunk."""
     n_rows = ctl[N_ROWS]
+    points, rows, tol = job.points, job.rows, job.par[0]
+    surf, vel, has_vel, kind, side_src, geom, layout, zz = job.maps  # (query_point_into is inlined:
+    status, surface, penetration, normal, velocity, map_index = job.answers  # no *args there)
     while True:
         c = claim(ctl, r)
         if c < 0:
-            return
+            return 0
         hi = min(n_rows, (c + 1) * ROW_CHUNK)
         for i in range(c * ROW_CHUNK, hi):
             p = rows[i]
-            query_point_into(points[p, 0], points[p, 1], points[p, 2], par[0], surf, vel, has_vel,
-                             kind, side_src, geom, layout, zz, p, status, surface, penetration, normal,
-                             velocity, map_index)
+            query_point_into(points[p, 0], points[p, 1], points[p, 2], tol, surf, vel, has_vel, kind, side_src, geom,
+                             layout, zz, p, status, surface, penetration, normal, velocity, map_index)
         chunk_done(ctl, tally, hi - c * ROW_CHUNK)
 
 
-@serial_kernel(fastmath=False)
-def _rows_help(ctl, wait, par, points, rows, surf, vel, has_vel, kind, side_src, geom, layout, zz,
-               status, surface, penetration, normal, velocity, map_index):
-    """The solver's thread: the chunks of the last request not yet claimed, then the wait for
-    those the server holds; returns the ticks it waited, -1 when one was not finished within
-    `wait` ticks."""
-    _rows_work(ctl, atomic_load(ctl, REQ), SOLVER_CHUNKS, par, points, rows, surf, vel, has_vel, kind, side_src,
-               geom, layout, zz, status, surface, penetration, normal, velocity, map_index)
-    return wait_chunks(ctl, wait)
-
-
-@serial_kernel(fastmath=False)
-def _rows_serve(ctl, par, points, rows, surf, vel, has_vel, kind, side_src, geom, layout, zz,
-                status, surface, penetration, normal, velocity, map_index):
-    """The row query server's kernel (engine.collide.server): takes chunks of each request
-    beside the solver's thread; returns on ctl[STOP], or after IDLE ticks without a request."""
-    last = ctl[DONE]
-    atomic_store(ctl, RUNNING, 2)
-    while True:
-        r = serve_wait(ctl, last)
-        if r < 0:
-            return
-        last = r
-        _rows_work(ctl, r, SERVER_CHUNKS, par, points, rows, surf, vel, has_vel, kind, side_src, geom, layout, zz,
-                   status, surface, penetration, normal, velocity, map_index)
-        atomic_store(ctl, DONE, r)
+register_job(RowsJob, _rows_work)
 
 
 def alloc_answers(collider, n: int) -> None:
@@ -80,12 +60,13 @@ def alloc_answers(collider, n: int) -> None:
     collider._n = n
 
 
-class MapCollider:
+class MapCollider(Collider):
     """Cloth points against CollisionMaps (vertex and face-midpoint checks, seed 003 §5.3).
     Output arrays are reused between calls (one call per simulation step); set_maps() swaps
     in a new body frame's maps (walking)."""
 
     depth_along_z = True  # depth is measured along z (query.py), not along the normal
+    answers_rows = True
 
     def __init__(self, maps: CollisionMaps, tol: float | None = None, helper: bool | None = None):
         """helper: a query of many rows is shared with a helper thread (query_rows); None: unless
@@ -136,15 +117,16 @@ class MapCollider:
             sv = self.server = SpinServer("map-query-server")
         key = (points, rows, self.maps, self._n)
         if self._served is None or any(a is not b for a, b in zip(self._served[0], key)):
-            self._served = (key, (sv.par, points, rows, *self.maps.kernel_args(), self.status, self.surface,
-                                  self.depth, self.normal, self.velocity, self.map_index))
-        args = self._served[1]
-        if not sv.running_on(args):
-            sv.start(_rows_serve, args)
+            self._served = (key, RowsJob(sv.par, points, rows, self.maps.kernel_args(),
+                                         (self.status, self.surface, self.depth, self.normal, self.velocity,
+                                          self.map_index)))
+        job = self._served[1]
+        if not sv.running_on(job):
+            sv.start(job)
         sv.par[0] = self.tol
         sv.ctl[N_ROWS] = n_rows
         sv.post_chunks(-(-n_rows // ROW_CHUNK))
-        lost = after_help(_rows_help(sv.ctl, self.help_wait, *args), self.stalls)
+        lost = after_help(sv.help(job, self.help_wait), self.stalls)
         self.stats["shared_rows"] += n_rows
         if lost:
             self.stats["helper_let_go_after_rows"] = self.stats["rows"]

@@ -31,12 +31,11 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
 from engine.body.types import SEGMENT_ID, SEGMENTS, Body
 from engine.collide.gl import GL, compile_program, ensure_context, read_pixels, thread_context
 from engine.errors import InputError
-from engine.jit import serial_kernel
+from engine.jit import njit, serial_kernel
 
 KIND_EMPTY, KIND_BODY, KIND_SIDE = 0, 1, 2
 SEGMENT_GROWTH_RINGS = 0  # rings a segment map reaches into its neighbours; 3 closed the armpit

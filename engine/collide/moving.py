@@ -31,7 +31,7 @@ band is not asked again at every check.
 The query server (`prefetch`): right after a collision check the solver predicts where its
 points will be at the next check, and a helper thread answers them for that time while the cloth
 steps on; the next check's query then finds most answers fresh. The thread
-(engine.collide.server.SpinServer) runs one nogil kernel per frame's maps (_serve) that spins
+(engine.collide.server.SpinServer) runs one nogil kernel per frame's maps (engine.collide.server.serve) that spins
 between requests, handed over through atomic control words -- no GIL, no sleeping: a pool
 thread woken per request started ~0.25 ms late (median; 0.7 ms at the 90th percentile) and
 took the GIL twice a request, and the cloth steps
@@ -42,7 +42,7 @@ six interleaved rounds: 79-98 instead of 101-128 ms a frame in five, worse in on
 Every request -- the prefetch, and the check's own query of the points where they are -- is
 answered in chunks of CHUNK points that either thread claims (_work): the server starts on a
 request at once, and the solver's thread, when it needs the answers, takes the chunks not yet
-claimed instead of waiting (_help), then waits only for the chunks the server holds. A point's
+claimed instead of waiting (SpinServer.help), then waits only for the chunks the server holds. A point's
 answer depends on its own rows alone, so the answers are the same bit for bit whoever answers
 which chunk (tests/test_walk.py). Measured on the walking dress (4374 vertices, 2 s): waiting for
 the server had cost 5.8-10.7 ms a frame -- 8 % of its prefetches were not even begun by the
@@ -73,21 +73,22 @@ from __future__ import annotations
 
 import math
 import time
+from collections import namedtuple
 
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
-from numba import njit
 
 from engine.body.motion import BodyTrack
 from engine.body.types import Body
+from engine.collide.base import Collider
 from engine.collide.collider import alloc_answers
 from engine.collide.gl import drop_thread_context
 from engine.collide.maps import CollisionMaps, MapRenderer
 from engine.collide.query import query_point_into
-from engine.collide.server import (ASKED, DONE, HELP_WAIT, REQ, RUNNING, SERVER_CHUNKS, SOLVER_CHUNKS, SpinServer,
-                                   StallWatch, after_help, chunk_done, claim, helper_default, serve_wait, wait_chunks)
-from engine.jit import atomic_load, atomic_store, serial_kernel
+from engine.collide.server import (ASKED, HELP_WAIT, SERVER_CHUNKS, SOLVER_CHUNKS, SpinServer, StallWatch, after_help,
+                                   chunk_done, claim, helper_default, register_job)
+from engine.jit import njit, serial_kernel
 
 REACH = 0.002  # m: a point that moved this far (in the root's frame) since its answer asks again
 MAX_AGE = 0.002  # s: ... and so does an answer this old
@@ -176,69 +177,41 @@ def _face_point(pts, p, n_vertices, quads, tris):
 SERIAL, WHICH = 4, 9  # the walking query server's own words: the maps' serial, which points (0: predicted, 1: this step's)
 CHUNK = 512  # points a claim takes
 
+# A walking query shared with the query server: the world points pre_pts (predicted) or pts
+# (ctl[WHICH]) with the face rows from n_vertices on made from quads and tris (fill_faces),
+# against one frame's maps (the eight arrays of CollisionMaps.kernel_args; their serial
+# ctl[SERIAL]) with par: t, tol, widened, shift_t, vmax, root_v, the root's offset; the carried
+# answers (c_local, c_time, c_frame, c_pen, c_un, c_surf) and the answers (status, surface,
+# penetration, normal, velocity, map_index)
+TrackJob = namedtuple("TrackJob", "par pre_pts pts n_vertices quads tris maps carried answers")
+
 
 @serial_kernel
-def _work(ctl, r, tally, par, pre_pts, pts, n_vertices, quads, tris, surf, vel, has_vel, kind, side_src, geom,
-          layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
-          status, surface, penetration, normal, velocity, map_index):
-    """Answer chunks of request r (_query_cached with the parameters in par: t, tol, widened,
-    shift_t, vmax, root_v, the root's offset; ctl[SERIAL]; the world points pre_pts or pts,
-    ctl[WHICH]) until none is left to claim (engine.collide.server.claim: each chunk by one
-    thread, whichever); returns the points this thread asked. (Each chunk takes its points into
-    the root's frame itself: written into a buffer of their own by the solver's thread, those
-    rows went over to the server's core and back at every request -- measured, 41 us a request
-    of the dress's 7,426 points, for a subtraction.)"""
+def _work(ctl, r, tally, job):
+    """Answer chunks of request r of a TrackJob (_query_cached) until none is left to claim (the
+    solver's thread claims from the end: engine.collide.server.claim); returns the points this
+    thread asked. (Each chunk takes its points into the root's frame itself.)"""
     asked = 0
     root_v = np.empty(3)
     off = np.empty(3)
-    n = c_time.shape[0]
+    par = job.par
+    n = job.carried[1].shape[0]
     while True:
-        c = claim(ctl, r, tally == SOLVER_CHUNKS)  # (the solver's thread from the end: engine.collide.server.claim)
+        c = claim(ctl, r, tally == SOLVER_CHUNKS)
         if c < 0:
             return asked
         for k in range(3):
             root_v[k] = par[5 + k]
             off[k] = par[8 + k]
-        points = pts if ctl[WHICH] != 0 else pre_pts
+        points = job.pts if ctl[WHICH] != 0 else job.pre_pts
         k = _query_cached(points, off, c * CHUNK, min(n, (c + 1) * CHUNK), par[0], ctl[SERIAL], par[1], par[2], par[3],
-                          root_v, par[4], REACH, MAX_AGE, SLACK, NEAR, n_vertices, quads, tris, surf, vel,
-                          has_vel, kind, side_src, geom, layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
-                          status, surface, penetration, normal, velocity, map_index)
+                          root_v, par[4], REACH, MAX_AGE, SLACK, NEAR, job.n_vertices, job.quads, job.tris,
+                          *job.maps, *job.carried, *job.answers)
         asked += k
         chunk_done(ctl, tally, k)
 
 
-@serial_kernel
-def _help(ctl, wait, par, pre_pts, pts, n_vertices, quads, tris, surf, vel, has_vel, kind, side_src, geom,
-          layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
-          status, surface, penetration, normal, velocity, map_index):
-    """The solver's thread: answer what is left of the last request (_work), then wait for the
-    chunks the server holds. Returns the ticks it waited, or -1 when a chunk was not finished
-    within `wait` time-stamp counter ticks (the server's thread died holding it)."""
-    _work(ctl, atomic_load(ctl, REQ), SOLVER_CHUNKS, par, pre_pts, pts, n_vertices, quads, tris, surf, vel,
-          has_vel, kind, side_src, geom, layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
-          status, surface, penetration, normal, velocity, map_index)
-    return wait_chunks(ctl, wait)
-
-
-@serial_kernel
-def _serve(ctl, par, pre_pts, pts, n_vertices, quads, tris, surf, vel, has_vel, kind, side_src, geom,
-           layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
-           status, surface, penetration, normal, velocity, map_index):
-    """The query server's kernel (engine.collide.server; TrackCollider._post) for one frame's
-    maps: takes chunks of each request (_work) beside the solver's thread; returns on
-    ctl[STOP], or after IDLE ticks without a request."""
-    last = ctl[DONE]
-    atomic_store(ctl, RUNNING, 2)
-    while True:
-        r = serve_wait(ctl, last)
-        if r < 0:
-            return
-        last = r
-        _work(ctl, r, SERVER_CHUNKS, par, pre_pts, pts, n_vertices, quads, tris, surf, vel, has_vel, kind, side_src,
-              geom, layout, zz, c_local, c_time, c_frame, c_pen, c_un, c_surf,
-              status, surface, penetration, normal, velocity, map_index)
-        atomic_store(ctl, DONE, r)
+register_job(TrackJob, _work)
 
 
 @serial_kernel
@@ -306,10 +279,12 @@ def _expanded(half: np.ndarray, out: np.ndarray | None) -> np.ndarray:
     return out
 
 
-class TrackCollider:
+class TrackCollider(Collider):
     """Cloth points against a BodyTrack, through per-frame collision maps."""
 
     solver_carries = False  # the body moves every step; it carries answers itself (_query_cached)
+    prefetches = True
+    makes_face_points = True
 
     def __init__(self, track: BodyTrack, renderer, tol: float, keep: bool = True,
                  compact: bool = True, ahead: bool = False, helper: bool | None = None):
@@ -507,8 +482,8 @@ class TrackCollider:
                 self._vmax = self._vmax_of[key] = float(np.sqrt(np.einsum("ij,ij->i", rel, rel).max()))
             self._k_serial += 1  # answers from other maps are not carried over
             if self.helper and self._n > 0:  # the server starts on these maps now, not at the first query
-                self._served = self._server_args()
-                self.server.start(_serve, self._served)
+                self._served = self._job()
+                self.server.start(self._served)
         self._shift_t = t - i / tr.fps
         self._t = t
         self._offset = tr.offset_at(t)
@@ -569,9 +544,9 @@ class TrackCollider:
         answers the rest and waits."""
         sv = self.server
         if self._served is None:  # (None at every change of maps, set_time, and of arrays, _alloc)
-            self._served = self._server_args()
+            self._served = self._job()
         if self.helper and not sv.running_on(self._served):
-            sv.start(_serve, self._served)
+            sv.start(self._served)
         ctl, par = sv.ctl, sv.par
         ctl[WHICH] = which
         ctl[SERIAL] = self._k_serial
@@ -586,8 +561,7 @@ class TrackCollider:
         the chunks it holds."""
         if not self._posted:
             return
-        lost = after_help(_help(self.server.ctl, self.help_wait, *self._served),
-                          self.stalls if self.helper else None)
+        lost = after_help(self.server.help(self._served, self.help_wait), self.stalls if self.helper else None)
         self._posted = False
         if lost:  # the machine has no core for it: answer alone from now on
             self.helper = False
@@ -605,16 +579,13 @@ class TrackCollider:
             return np.ascontiguousarray(points, dtype=np.float64)
         return current
 
-    def _server_args(self) -> tuple:
-        """_serve's arguments after ctl: par, the prefetched and the queried points, the maps',
-        the carried answers and the answers."""
-        return (self.server.par, self._pre_pts, self._pts, self._n_vertices, self._quads, self._tris,
-                *self.maps.kernel_args(), *self._carried())
-
-    def _carried(self) -> tuple:
-        """_query_cached's arrays after the maps': the carried answers, then the answers."""
-        return (self.c_local, self.c_time, self.c_frame, self.c_pen, self.c_un, self.c_surf,
-                self.status, self.surface, self.depth, self.normal, self.velocity, self.map_index)
+    def _job(self) -> TrackJob:
+        """The query server's job on this frame's maps: the prefetched and the queried points, the
+        maps, the carried answers and the answers."""
+        return TrackJob(self.server.par, self._pre_pts, self._pts, self._n_vertices, self._quads, self._tris,
+                        self.maps.kernel_args(),
+                        (self.c_local, self.c_time, self.c_frame, self.c_pen, self.c_un, self.c_surf),
+                        (self.status, self.surface, self.depth, self.normal, self.velocity, self.map_index))
 
     def _stop_server(self) -> None:
         """Stop serving this frame's maps (its answers are in the carried arrays)."""
@@ -671,7 +642,7 @@ def _shift_answers(status, depth, normal, velocity, root_v, shift_t, tol):
         status[i] = 2 if d > tol else (1 if d > 0.0 else 0)
 
 
-class TrackObjectCollider:
+class TrackObjectCollider(Collider):
     """The object-space baseline on a moving body: the BVH over the body triangles is refitted
     to the nearest frame (relative to the root, like the maps), points move into the root's
     frame, and the surface between frames moves along its velocity as in TrackCollider."""

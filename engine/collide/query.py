@@ -37,10 +37,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit, prange
 
 from engine.collide.maps import CollisionMaps
-from engine.jit import serial_kernel
+from engine.jit import njit, prange, serial_kernel
 
 CLEAR, BAND, INSIDE = 0, 1, 2
 

@@ -1,26 +1,26 @@
-"""The query servers' thread: a helper thread that runs one nogil kernel at a time and takes
-requests from the solver's thread through an array of control words -- no GIL.
+"""The query server: a helper thread that runs one nogil kernel (serve) and takes requests from
+the solver's thread through an array of control words -- no GIL.
 
-The kernel (a serial_kernel: engine.collide.moving._serve, the walking query server, and
-engine.collide.collider._rows_serve, the drape's) sets ctl[RUNNING] to 2, waits until ctl[REQ]
-goes past the last request it answered (serve_wait), answers, and sets ctl[DONE] to the request.
-A request is answered in chunks that the kernel and the poster claim as they come (post_chunks,
-claim, chunk_done, wait_chunks): the poster never waits for a late server, only for the chunks it
-holds. Between requests the kernel spins rather than sleeps: waking a thread took ~0.25 ms here
-(median; 0.7 ms at the 90th percentile), as long as the work it was woken for (measured again with
-a futex: a kernel that slept after 2 ms without a request made the drape 8-14 % slower an
-iteration). A spinning helper takes a core that other work on the machine may want: a collider
+A request is answered in chunks that the server's thread and the poster claim as they come
+(post_chunks, claim, chunk_done; the poster then answers what is left and waits only for the
+chunks the server holds: SpinServer.help) -- the poster never waits for a late server. What a
+chunk is depends on the job: a namedtuple of the arrays a request reads and writes, whose class
+was registered with its work function (register_job; engine.collide.collider's RowsJob for the
+drape's row queries, engine.collide.moving's TrackJob for the walk's). A point's answer depends
+on its own rows alone, so the answers are the same whichever thread answers which chunk.
+
+Between requests the kernel spins rather than sleeps (waking a sleeping thread costs as long as
+the work it was woken for). A spinning helper takes a core that other work may want: a collider
 lets its helper go when waits for the helper's chunks show it is not getting one (StallWatch),
-and TRYON_QUERY_HELPER=0 turns helpers off (helper_default). The kernel returns when ctl[STOP]
-is set, or by itself after IDLE ticks (~0.1 s) without a request -- then ctl[RUNNING] is 0 and
-the next request starts it again. A wait for an
-answer is an error after WAIT seconds of a running kernel, or as soon as the thread is dead; not
-while the kernel has not started (its first call in a process may compile it, for seconds).
+and a collider made with helper=False never starts one. The kernel returns when ctl[STOP] is
+set, or by itself after IDLE ticks (~0.1 s) without a request; the next request starts it again.
+A wait for an answer is an error after WAIT seconds of a running kernel, or as soon as the
+thread is dead; not while the kernel has not started (its first call may compile it).
 
     server = SpinServer("query-server")
-    server.start(kernel, args)      # (again whenever the arrays change)
-    server.post_chunks(n)           # ... the kernel works while this thread goes on
-    ... this thread claims what is left, then waits for the kernel's chunks (wait_chunks)
+    server.start(job)               # (again whenever the job's arrays change)
+    server.post_chunks(n)           # ... the server's thread starts on it
+    waited = server.help(job, HELP_WAIT)   # this thread answers what is left, waits for the rest
     server.close()
 """
 
@@ -34,10 +34,10 @@ from collections import deque
 from queue import Queue
 
 import numpy as np
-from numba import njit
 
 from engine.errors import SimulationError
-from engine.jit import atomic_add, atomic_cas, atomic_load, atomic_store, cycle_counter, spin_pause
+from engine.jit import (atomic_add, atomic_cas, atomic_load, atomic_store, cycle_counter, nbtypes, njit, overload,
+                        serial_kernel, spin_pause)
 
 REQ, DONE, STOP, RUNNING = range(4)  # control words; the kernels may use ctl[4:] for their own
 # ... and a request answered in chunks (post_chunks; claim, chunk_done, wait_chunks): points the
@@ -118,6 +118,46 @@ def wait_chunks(ctl, wait):
             return -1
         spin_pause()
     return cycle_counter() - since
+
+
+def answer_chunks(ctl, r, tally, job):
+    """Inside a kernel: answer chunks of request r of `job` (claim: each chunk by one thread,
+    counted in ctl[tally]) until none is left to claim. Each job class has its own work function
+    (register_job)."""
+    raise TypeError(f"no work function is registered for {type(job).__name__} (engine.collide.server.register_job)")
+
+
+def register_job(cls: type, work) -> None:
+    """Jobs of the namedtuple class `cls` are answered by the numba function work(ctl, r, tally,
+    job) (serve, SpinServer.help)."""
+    @overload(answer_chunks)
+    def _answer(ctl, r, tally, job):
+        if isinstance(job, nbtypes.BaseNamedTuple) and job.instance_class is cls:
+            return lambda ctl, r, tally, job: work(ctl, r, tally, job)
+
+
+@serial_kernel
+def serve(ctl, job):
+    """The server thread's kernel: takes chunks of each request as they are posted; returns on
+    ctl[STOP], or after IDLE ticks without a request."""
+    last = ctl[DONE]
+    atomic_store(ctl, RUNNING, 2)
+    while True:
+        r = serve_wait(ctl, last)
+        if r < 0:
+            return
+        last = r
+        answer_chunks(ctl, r, SERVER_CHUNKS, job)
+        atomic_store(ctl, DONE, r)
+
+
+@serial_kernel
+def answer_rest(ctl, wait, job):
+    """The poster's thread: the chunks of the last request not yet claimed, then the wait for
+    those the server holds; returns the ticks it waited, -1 when one was not finished within
+    `wait` ticks."""
+    answer_chunks(ctl, atomic_load(ctl, REQ), SOLVER_CHUNKS, job)
+    return wait_chunks(ctl, wait)
 
 
 STALL = 900_000  # time-stamp counter ticks (~0.3 ms): a wait for the helper's chunks this long is a stall
@@ -222,12 +262,12 @@ class SpinServer:
         self._jobs: Queue | None = None
         self._args = None
 
-    def running_on(self, args: tuple) -> bool:
-        """Whether the kernel runs (or is about to) on these arrays (the same tuple object)."""
-        return bool(self.ctl[RUNNING]) and self._args is args
+    def running_on(self, job: tuple) -> bool:
+        """Whether the kernel runs (or is about to) on this job (the same tuple object)."""
+        return bool(self.ctl[RUNNING]) and self._args is job
 
-    def start(self, kernel, args: tuple) -> None:
-        """Run kernel(ctl, *args) in the thread (stopping the one running)."""
+    def start(self, job: tuple) -> None:
+        """Run serve(ctl, job) in the thread (stopping the one running)."""
         self.stop()
         if self._thread is None:
             self._jobs = Queue()
@@ -235,12 +275,17 @@ class SpinServer:
             self._thread.start()
             self._final = weakref.finalize(self, _end, self.ctl, self._jobs)
         self.ctl[DONE] = self._req  # (nothing pending)
-        self._kernel, self._args = kernel, args
+        self._args = job
         self._launch()
 
     def _launch(self) -> None:
         self.ctl[RUNNING] = 1
-        self._jobs.put((self._kernel, (self.ctl, *self._args)))
+        self._jobs.put((serve, (self.ctl, self._args)))
+
+    def help(self, job: tuple, wait: int) -> int:
+        """Answer what the server's thread has not claimed of the last request, then wait for the
+        chunks it holds: the ticks waited, or -1 after `wait` ticks (see after_help)."""
+        return int(answer_rest(self.ctl, wait, job))
 
     @property
     def next_request(self) -> int:

@@ -34,10 +34,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from engine.body.types import Body
+from engine.cloth.config import Control
 from engine.cloth.model import ClothState
 from engine.cloth.solver import ClothSolver
 from engine.errors import InputError
-from engine.scene.drape import DrapeOptions, DrapeResult, Progress, drape
+from engine.scene.drape import DrapeResult, Progress, dressing_config, drape
+from engine.scene.request import TryOnOptions
+from engine.scene.tuning import Tuning
 
 LIFT_STEP = 5.0  # degrees
 LIFT_MAX = 45.0  # degrees
@@ -114,57 +117,55 @@ def lowering_track(lift: ArmLift):
                      cycle_start=0, cycle_frames=0, shift=np.zeros(3), notes=[])
 
 
-def lower_arms(lift: ArmLift, res: DrapeResult, options: DrapeOptions, *, texel: float, window, segments,
+def lower_arms(lift: ArmLift, res: DrapeResult, request: TryOnOptions, tuning: Tuning, plan, *,
                progress: Progress | None = None, observer=None) -> DrapeResult:
     """Steps 3 and 4 of the module doc: the drape `res` made on lift.raised, on lift.rigged
-    (the body as loaded). `window` and `segments` are the maps to settle against
-    (engine.scene.tryon.plan_maps on the body as loaded). Returns the drape with its iterations
-    and timing counting the new stages ("lowering_arms", "settling")."""
+    (the body as loaded). `plan`: the maps to settle against (engine.scene.tryon.plan_maps on the
+    body as loaded). Returns the drape with its iterations and timing counting the new stages
+    ("lowering_arms", "settling")."""
     from engine.collide.collider import MapCollider
     from engine.collide.maps import render_body_maps
-    from engine.scene.walk import WalkOptions, walk_cloth
+    from engine.scene.walk import walk_cloth
 
-    o = options
     progress = progress or (lambda *a: None)
-    p = o.params
     track = lowering_track(lift)
     t0 = time.perf_counter()
-    walk = walk_cloth(lift.rigged, res, WalkOptions(seconds=(len(track.frames) - 1) / FPS, fps=FPS, reuse_maps=False,
-                                                    vm_passes=p.vm_passes, collide_every=1,
-                                                    contact_rounds=p.contact_rounds, strain_guard=o.strain_guard,
-                                                    friction=0.0, stiffness=1.0,
-                                                    # (part of dressing, held to the drape's strain bar: double,
-                                                    # as the drape -- single precision left the sample scan's
-                                                    # shirt at 7.13 %, bar 7 %)
-                                                    single_precision_forces=False),
-                      texel=texel, tol=p.tolerance, track=track,
-                      progress=lambda s, f, m: progress("lowering arms", f, m),
+    # part of dressing, held to the drape's strain bar: the walk's step in double precision with the
+    # drape's strain limit and guard, every step checked, without friction (the arms slide past the
+    # cloth), maps of every frame, the drape's stiffness
+    d = tuning.drape.step
+    step = replace(tuning.walk.step, precision="double", strain_guard=d.strain_guard, vm_passes=d.vm_passes,
+                   contact_rounds=d.contact_rounds)
+    lowering = replace(tuning, collide_every=1, walk=replace(tuning.walk, friction=0.0, step=step))
+    walk = walk_cloth(lift.rigged, res, request.model_copy(update={"seconds": (len(track.frames) - 1) / FPS,
+                                                                   "fps": FPS, "reuse_maps": False,
+                                                                   "walk_stiffness": 1.0}),
+                      lowering, track=track, progress=lambda s, f, m: progress("lowering arms", f, m),
                       observer=None if observer is None else
                       (lambda stage, x, tri, bv: observer("lowering arms", x, tri, bv)))
     t_lower = time.perf_counter() - t0
     frames = walk.garment_frames
     state = ClothState(frames[-1].astype(np.float64), (frames[-1] - frames[-2]).astype(np.float64) * FPS)
     t0 = time.perf_counter()
-    maps = render_body_maps(lift.rigged, texel=texel, window=window, segments=segments, tol=p.tolerance)
+    maps = render_body_maps(lift.rigged, texel=request.texel, window=plan.window, segments=plan.segments,
+                            tol=tuning.cloth.tolerance)
     t_maps = time.perf_counter() - t0
     collider = MapCollider(maps)
-    solver = ClothSolver(res.model, collider, dt=o.dt, force_dt=o.force_dt)
-    if p.strain_guard is None:
-        solver.strain_guard = o.strain_guard
+    solver = ClothSolver(res.model, collider, dressing_config(request, tuning), dt=request.dt,
+                         force_dt=request.force_dt)
     relax = int(math.ceil(RELAX_TIME / solver.dt))
     t0 = time.perf_counter()
+    control = Control(damping_scale=tuning.drape.damping, friction_scale=0.0)
     for it in range(relax):
-        solver.step(state, damping_scale=o.drape_damping, friction_scale=0.0)
+        solver.step(state, control)
         if it % 200 == 0:
             progress("settling", 0.0, "relaxing the cloth after lowering the arms")
     t_relax = time.perf_counter() - t0
     try:
         # the cloth lies pressed between the lowered arms and the torso: checked at every step
-        # (measured, every 2nd step while the strain stayed under threshold + 1 %: 3.7 mm into
-        # the body where 3 are allowed; DrapeOptions.tight_every_step)
-        every = o if o.collide_every is not None else replace(o, collide_every=1)
-        settled = drape(res.model, state, collider, every, lambda s, f, m: progress("settling", f, m), observer,
-                        gravity_from=1.0, solver=solver)
+        settling = tuning if tuning.collide_every is not None else replace(tuning, collide_every=1)
+        settled = drape(res.model, state, collider, request, settling, lambda s, f, m: progress("settling", f, m),
+                        observer, gravity_from=1.0, solver=solver)
     finally:
         collider.release()  # (its query helper thread)
     w = walk.report

@@ -43,9 +43,11 @@ def _dress(body, garment: str, h: float, texel: float = 0.005, collision: str = 
     from engine.cloth.fabrics import get_fabric
     from engine.cloth.model import ClothParams, build_model
     from engine.garment.garment import build_garment
-    from engine.scene.drape import DrapeOptions, _edge
+    from engine.scene.drape import _edge
     from engine.scene.garments import resolve_garment
+    from engine.scene.request import TryOnOptions
     from engine.scene.tryon import run_tryon
+    from engine.scene.tuning import Tuning
 
     spec, place, label = resolve_garment(garment, body, "M")
     base = ClothParams()
@@ -53,10 +55,10 @@ def _dress(body, garment: str, h: float, texel: float = 0.005, collision: str = 
     g = build_garment(spec, h=h, place=place)
     bound = build_model(g.uv, g.panel, g.lattice, g.quads, g.tris, g.seams, get_fabric(fabric), _edge(g),
                         params).dt_bound
-    opts = DrapeOptions(fabric=fabric, dt=dt_fraction * bound, force_dt=False, params=params)
+    request = TryOnOptions(fabric=fabric, resolution_cm=100 * h, texel_mm=1000 * texel, collision=collision,
+                           dt_ms=1000 * dt_fraction * bound)
     t0 = time.perf_counter()
-    res, rep = run_tryon(body, spec, fabric=fabric, h=h, texel=texel, collision=collision, options=opts,
-                         place=place, source=label)
+    res, rep = run_tryon(body, spec, request, Tuning(cloth=params), place=place, source=label)
     return res, rep, time.perf_counter() - t0
 
 
@@ -214,8 +216,7 @@ def _ms_per_iteration(body, garment: str, h: float, collision: str, steps: int) 
     for _ in range(steps):
         solver.step(state)
     ms = 1000 * (time.perf_counter() - t0) / steps
-    if hasattr(collider, "release"):  # (the map collider's query helper thread)
-        collider.release()
+    collider.release()  # (the map collider's query helper thread)
     return ms, model.n, t_maps
 
 
@@ -296,7 +297,8 @@ def run_stability(body, quick: bool, say: Say) -> dict:
     off -- the walk stops itself with SimulationError -- or any other exception: a bug)."""
     from engine.body.motion import WalkParams, walk_track
     from engine.errors import InputError, SimulationError
-    from engine.scene.walk import WalkOptions, walk_cloth
+    from engine.scene.request import TryOnOptions
+    from engine.scene.walk import walk_cloth
 
     stiff = (1.0, 100.0) if quick else (0.1, 1.0, 10.0, 100.0)
     fracs = (1.0, 1.5) if quick else (0.25, 0.5, 1.0, 1.5)
@@ -314,8 +316,7 @@ def run_stability(body, quick: bool, say: Say) -> dict:
             for s in speeds:
                 cell = {"stiffness": k, "dt_fraction": f, "speed": s}
                 try:
-                    w = walk_cloth(body, drape, WalkOptions(seconds=0.3, stiffness=1.0), texel=0.005,
-                                   tol=model.params.tolerance, track=tracks[s])
+                    w = walk_cloth(body, drape, TryOnOptions(seconds=0.3, walk_stiffness=1.0), track=tracks[s])
                     cell.update(outcome="stable", strain_max=w.report["strain_max"],
                                 penetration_max_mm=w.report["penetration_mm"]["max"])
                 except InputError as e:

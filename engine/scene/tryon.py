@@ -19,7 +19,10 @@ from engine.cloth.fabrics import get_fabric
 from engine.errors import InputError, SimulationError
 from engine.garment.garment import Garment, build_garment
 from engine.pattern.spec import PatternSpec
-from engine.scene.drape import DrapeOptions, DrapeResult, Progress, most_stretched, sew_and_drape
+from engine.scene.drape import DrapeResult, Progress, most_stretched, sew_and_drape
+from engine.scene.garments import PATTERN_SIZE_ADVICE, dress_in_size
+from engine.scene.request import TryOnOptions, TryOnRequest
+from engine.scene.tuning import Tuning
 
 
 @dataclass
@@ -67,35 +70,26 @@ def plan_maps(body: Body, garment: Garment, texel: float, collision: str) -> Try
     return TryOnPlan(texel, window, segs, left)
 
 
-def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float = 0.015,
-              texel: float = 0.005, collision: str = "image", options: DrapeOptions | None = None,
-              place=None, source: str = "pattern", progress: Progress | None = None,
-              observer=None, lift=None) -> tuple[DrapeResult, dict]:
+def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOptions(), tuning: Tuning = Tuning(), *,
+              place=None, source: str = "pattern", progress: Progress | None = None, observer=None,
+              lift=None) -> tuple[DrapeResult, dict]:
     """Sew and drape `spec` on `body`; returns the result and the report (see DESIGN).
+    place: the catalogue's placement function (None: the pattern's own, carried by landmarks).
     observer: see engine.scene.drape.Observer (the cloth as it is simulated, for a live view).
     lift: an engine.scene.arms.ArmLift of `body` -- sew and drape on its raised body (`place`
     made for that body), then lower the arms and settle on `body`."""
-    from engine.collide.bvh import MeshBVH, ObjectSpaceCollider, penetration_stats
+    from engine.collide.bvh import MeshBVH, penetration_stats
 
     progress = progress or (lambda *a: None)
-    if collision not in ("image", "object"):
-        raise InputError(f"collision '{collision}': use image or object")
-    if not (0.0005 <= texel <= 0.05):
-        raise InputError(f"texel {texel * 1000:.2f} mm is out of range (0.5 .. 50 mm)")
-    if lift is not None and collision != "image":
+    if lift is not None and request.collision != "image":
         raise InputError("dressing with the arms raised and lowering them needs the image-space collision "
                          "(--collision image)")
-    o = replace(options or DrapeOptions(), fabric=fabric)
     loaded, body = body, (lift.raised if lift is not None else body)  # the body sewn and draped on
     sew_note = None
-    if o.sew_friction is None:
-        o.sew_friction, sew_note = sewing_friction(body)
-    get_fabric(fabric)
-    from engine.cloth.kernels import VM_MODES
-
-    if o.params.velocity_mode not in VM_MODES:  # refuse before any meshing or rendering
-        raise InputError(f"unknown velocity modification '{o.params.velocity_mode}'; "
-                         f"choose one of: {', '.join(VM_MODES)}")
+    if tuning.sew.friction is None:
+        friction, sew_note = sewing_friction(body)
+        tuning = replace(tuning, sew=replace(tuning.sew, friction=friction))
+    fab = get_fabric(request.fabric)
     t_all = time.perf_counter()
     # the body's BVH for the exact penetration figures at the end, built on the other core while
     # this thread meshes and places the panels and renders the maps (its kernels release the GIL)
@@ -109,22 +103,11 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
         from engine.garment.place import pattern_placement
 
         place, placement_note = pattern_placement(spec, body)
-    garment = build_garment(spec, h=h, place=place, source=source)
-    plan = plan_maps(body, garment, texel, collision)
+    garment = build_garment(spec, h=request.h, place=place, source=source)
+    plan = plan_maps(body, garment, request.texel, request.collision)
     t0 = time.perf_counter()
-    progress("maps", 0.0, "rendering collision maps" if collision == "image" else "building the BVH")
-    if collision == "image":
-        from engine.collide.collider import MapCollider
-        from engine.collide.maps import render_body_maps
-
-        maps = render_body_maps(body, texel=texel, window=plan.window, segments=plan.segments,
-                                tol=o.params.tolerance)
-        collider = MapCollider(maps)
-        map_info = {"maps": maps.names, "texel_mm": texel * 1000,
-                    "size": [[int(a), int(b)] for a, b in maps.layout[:, :2]]}
-    else:
-        collider = ObjectSpaceCollider(body.vertices, body.faces, tolerance=o.params.tolerance)
-        map_info = {"maps": [], "bvh_triangles": int(len(body.faces))}
+    progress("maps", 0.0, "rendering collision maps" if request.collision == "image" else "building the BVH")
+    collider, map_info = _body_collider(body, plan, request, tuning.cloth.tolerance)
     t_maps = time.perf_counter() - t0
     if lift is not None and observer is not None:  # a live view shows the raised body while sewing
         shown, watch = [False], observer
@@ -135,45 +118,34 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
             watch(stage, x, tri, bv)
     bvh = bvh_job.result()  # (done before the solver and its query helper thread start)
     try:
-        res = sew_and_drape(garment, collider, o, progress, observer=observer)
+        res = sew_and_drape(garment, collider, request, tuning, progress, observer=observer)
     except SimulationError as e:
         _carried_hint(e, placement_note)
         raise
     finally:
-        if hasattr(collider, "release"):  # (the map collider's query helper thread)
-            collider.release()
+        collider.release()  # (the map collider's query helper thread)
     res.spec = spec
     if lift is not None:
         from engine.scene.arms import lower_arms
 
-        plan_l = plan_maps(lift.rigged, garment, texel, collision)
-        res = lower_arms(lift, res, o, texel=texel, window=plan_l.window, segments=plan_l.segments,
-                         progress=progress, observer=observer)
+        plan_l = plan_maps(lift.rigged, garment, request.texel, request.collision)
+        res = lower_arms(lift, res, request, tuning, plan_l, progress=progress, observer=observer)
         body = loaded
+    shift = hang_shift(garment.positions, res.positions)
+    if shift["top"] < -SLID_OFF:  # settled, but not on the body: never written as a result
+        raise _slid(body, res, shift, placement_note)
     pen = penetration_stats(body.vertices, body.faces, res.positions, bvh=bvh)
     iters = sum(res.iterations.values())
     tc, tk = res.timing["cloth_total"], res.timing["collision_total"]
-    fab = get_fabric(fabric)
-    shift = hang_shift(garment.positions, res.positions)
-    if shift["top"] < -SLID_OFF:  # settled, but not on the body: never written as a result
-        floor = float(body.vertices[:, 1].min())
-        err = SimulationError(
-            f"the garment slid {-100 * shift['top']:.0f} cm down the body (its top ended "
-            f"{res.positions[:, 1].max() - floor:.2f} m above the floor): it did not stay where it was placed -- "
-            "it is too large for this body, or its seams did not close around it; try a smaller size, or "
-            "check the pattern's panels")
-        err.positions, err.triangles = res.positions.copy(), res.triangles  # for a picture
-        _carried_hint(err, placement_note, slid=True)
-        raise err
     report = {
-        "body": body.name, "garment": source, "fabric": fabric, "collision": collision,
+        "body": body.name, "garment": source, "fabric": request.fabric, "collision": request.collision,
         "cloth_vertices": int(len(res.positions)),
         "cloth_vertices_unsewn": int(garment.n_vertices),
         "iterations": int(iters),
         "iterations_by_stage": res.iterations,
         "dt_ms": res.dt * 1000, "dt_bound_ms": res.model.dt_bound * 1000,
-        # collisions are checked every this many steps (DrapeOptions.collide_every), so a
-        # collision ms per iteration is that of an average step, not of a step that checks
+        # collisions are checked every this many steps, so a collision ms per iteration is that
+        # of an average step, not of a step that checks
         "collision_every_steps": res.collide_every,
         "ms_per_iteration": {"cloth": 1000 * tc / max(iters, 1), "collision": 1000 * tk / max(iters, 1),
                              "total": 1000 * (tc + tk) / max(iters, 1)},
@@ -194,17 +166,58 @@ def run_tryon(body: Body, spec: PatternSpec, *, fabric: str = "cotton", h: float
         "collision_maps": map_info,
         "left_out": plan.left_out,
         **({"placement": placement_note} if placement_note else {}),
-        "sew_friction": {"scale": float(o.sew_friction),
-                         "why": sew_note or ("asked for" if o.sew_friction else "the panels slide into place")},
+        "sew_friction": {"scale": float(tuning.sew.friction),
+                         "why": sew_note or ("asked for" if tuning.sew.friction else "the panels slide into place")},
         "tight": bool(res.strain_max > fab.strain_threshold + TIGHT),
         "warnings": garment.warnings + hang_warnings(shift) + fit_warnings(res.strain_max, fab, res.settled,
-                                                                           o.drape_budget, pattern_file),
+                                                                           tuning.drape.budget, pattern_file),
     }
     if lift is not None:
         report["arms_lowered"] = {"degrees": lift.degrees, "arm_gap_cm": {"as_loaded": 100 * lift.gap_loaded,
                                                                            "raised": 100 * lift.gap_raised},
                                   "why": lift.describe(), **res.lowering}
     return res, report
+
+
+def dress_request(body: Body, request: TryOnRequest, tuning: Tuning = Tuning(), *, progress: Progress | None = None,
+                  observer=None, note=None, label: str | None = None) -> tuple[DrapeResult, dict]:
+    """Dress `body` in request.garment, in request.size (auto: chosen from the body's girths, then
+    by draping: engine.scene.garments.dress_in_size), as the command line and the service do.
+    note(size, why, next size): called before --size auto dresses a larger size. label: the
+    garment's name in the report (default: the catalogue's, or the pattern file's)."""
+    def dress(spec, place, name, **kw):
+        return run_tryon(body, spec, request, tuning, place=place, source=label or name, progress=progress,
+                         observer=observer, **kw)
+
+    return dress_in_size(request.garment, body, request.size, dress, note=note)
+
+
+def _body_collider(body: Body, plan: TryOnPlan, request: TryOnOptions, tolerance: float):
+    """The collider the garment is dressed against, and what the report says of it."""
+    if request.collision == "image":
+        from engine.collide.collider import MapCollider
+        from engine.collide.maps import render_body_maps
+
+        maps = render_body_maps(body, texel=request.texel, window=plan.window, segments=plan.segments,
+                                tol=tolerance)
+        return MapCollider(maps), {"maps": maps.names, "texel_mm": request.texel_mm,
+                                   "size": [[int(a), int(b)] for a, b in maps.layout[:, :2]]}
+    from engine.collide.bvh import ObjectSpaceCollider
+
+    return (ObjectSpaceCollider(body.vertices, body.faces, tolerance=tolerance),
+            {"maps": [], "bvh_triangles": int(len(body.faces))})
+
+
+def _slid(body: Body, res: DrapeResult, shift: dict, placement_note: str | None) -> SimulationError:
+    floor = float(body.vertices[:, 1].min())
+    err = SimulationError(
+        f"the garment slid {-100 * shift['top']:.0f} cm down the body (its top ended "
+        f"{res.positions[:, 1].max() - floor:.2f} m above the floor): it did not stay where it was placed -- "
+        "it is too large for this body, or its seams did not close around it; try a smaller size, or "
+        "check the pattern's panels")
+    err.positions, err.triangles = res.positions.copy(), res.triangles  # for a picture
+    _carried_hint(err, placement_note, slid=True)
+    return err
 
 
 def _carried_hint(err: Exception, placement_note: str | None, slid: bool = False) -> None:
@@ -266,8 +279,6 @@ def fit_warnings(strain: float, fabric, settled: bool, budget: float, pattern_fi
     is to grade it larger, not to pick a larger size."""
     out = []
     if strain > fabric.strain_threshold + TIGHT:
-        from engine.scene.garments import PATTERN_SIZE_ADVICE
-
         advice = PATTERN_SIZE_ADVICE if pattern_file else "try a larger size"
         out.append(f"the garment is tight: stretched {100 * strain:.0f} % where {fabric.name} allows "
                    f"{100 * fabric.strain_threshold:.0f} % ({advice})")

@@ -1,0 +1,115 @@
+"""The engine's tuning of each stage of a try-on (sewing, draping, walking): constants a user
+rarely changes, frozen, one line each. The measurements behind the values are in docs/tuning.md
+(keyed by these names); what a user sets is engine.scene.request."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from engine.cloth.config import StepConfig
+from engine.cloth.model import ClothParams
+from engine.errors import InputError
+
+
+@dataclass(frozen=True)
+class SewTuning:
+    """Sewing: each open stitch pair is pulled shut; a pair closer than weld_gap is welded."""
+
+    weld_gap: float | None = None  # m: a pair this close is welded (None: half a cloth edge)
+    tau: float = 0.02  # s: an open pair is pulled to close its gap in this time ...
+    vmax: float = 3.0  # m/s: ... at most this fast
+    far_gap: float = 0.2  # m: stitch pairs this far apart (median) are a flat layout round the body (GarmentCode's)
+    far_retry_vmax: float = 1.5  # m/s: a flat layout whose seams stopped closing is sewn again, pulled this fast (0: not)
+    retry_stall: float = 0.25  # s: ... judged stalled when its widest gap shrank < 1 mm over two windows this long
+    damping: float = 20.0  # x the viscous damping while sewing (no flapping) ...
+    far_damping: float = 1000.0  # ... or this for a flat layout, and for everything while calm_start lasts
+    calm_start: float = 0.05  # s: the strain a placement leaves relaxes without flinging the cloth
+    friction: float | None = None  # x the fabric's friction (None: 0, or more on a body whose arms hang close)
+    gravity: float = 1.0  # x g while sewing (a flared skirt without gravity opens into a disc)
+    gravity_ramp: float = 0.3  # s: gravity grows from 0 to g over this long (no jolt as it starts)
+    check_travel: float = 0.0015  # m: collisions are checked as often as the pull moves a point this far ...
+    max_check_every: int = 3  # ... at least every this many steps
+    budget: float = 4.0  # s of simulated time
+    snap_after: float = 2.0  # s: after this, seams that stopped closing ...
+    snap_stall: float = 0.5  # ... (the widest gap shrank < 1 mm over this long) ...
+    snap_gap: float = 0.02  # m: ... within this are welded where they are; wider, sewing gives up
+    seam_flexion: bool = True  # bending springs across the sewn seams
+
+    def validate(self) -> None:
+        if not (0.0 < self.check_travel <= 0.05):
+            raise InputError(f"sew check_travel {self.check_travel} m: use a distance in (0, 0.05]")
+
+
+@dataclass(frozen=True)
+class DrapeTuning:
+    """Draping: the sewn cloth settles under gravity until its shape stops moving."""
+
+    relax: str = "fire"  # fire (engine.cloth.solver.FireRelaxer) or viscous (the seeds' damping alone)
+    fire_damping: float = 100.0  # x the viscous damping while draping with FIRE ...
+    damping: float = 1000.0  # ... or with viscous damping alone
+    fire_ramp: float = 0.05  # s: with FIRE, gravity goes from where sewing left it to g over at most this
+    check_time: float = 0.0004  # s: collisions are checked every floor(this / dt) steps ...
+    max_check_every: int = 2  # ... at least every this many steps
+    tight_every_step: float = 0.01  # past the fabric's threshold + this, collisions are checked every step ...
+    tight_grace: float = 0.025  # s: ... after this much draping (the strain sewing leaves is worked off first)
+    budget: float = 6.0  # s of simulated time
+    min_time: float = 0.1  # s: drape at least this long
+    settle_time: float = 0.05  # s: settled when the RMS drift over each of two windows this long ...
+    settle_speed: float = 0.005  # m/s: ... is below this
+    too_tight: float = 0.10  # strain past the fabric's threshold by this: refused as too small ...
+    refuse_after: float = 2.0  # s: ... once it stayed so this long
+    step: StepConfig = StepConfig(strain_guard=0.009)  # (sewing uses it too; its guard waits until welded)
+
+    def validate(self) -> None:
+        if self.relax not in ("fire", "viscous"):
+            raise InputError(f"unknown relaxation '{self.relax}': use fire or viscous")
+        if not (0.0 <= self.tight_every_step <= 1.0):
+            raise InputError(f"tight_every_step {self.tight_every_step}: use 0 .. 1 (strain past the fabric's "
+                             "threshold)")
+        if not (0.0 < self.check_time <= 0.01):
+            raise InputError(f"drape check_time {self.check_time} s: use a time in (0, 0.01]")
+
+
+@dataclass(frozen=True)
+class WalkTuning:
+    """Walking: the dressed body walks, the cloth follows."""
+
+    stiffen_at: float | None = 0.10  # a frame past the fabric's threshold + this doubles the springs (None: never)
+    damping_cap: float = 0.5  # a spring's damping is at most this x m / (dt degree)
+    check_travel: float = 0.00175  # m: collisions are checked as often as the body's bulk travels this far ...
+    max_check_every: int = 8  # ... at least every this many steps
+    friction: float = 1.0  # x the fabric's cloth-body friction
+    render_ahead: bool = True  # maps rendered one frame ahead in a helper thread
+    prerender: bool = True  # a periodic walk's maps all rendered before the walking stage
+    step: StepConfig = StepConfig(strain_guard=0.02, flexion_every=8, push_time=0.005, precision="single",
+                                  hold_shear=True, keep_forces=False, late_guard=True)
+
+    def validate(self) -> None:
+        if self.stiffen_at is not None and not (0.0 < self.stiffen_at <= 0.4):
+            raise InputError(f"stiffen_at {self.stiffen_at}: use 0 .. 0.4 (strain past the fabric's threshold), "
+                             "or None")
+        if not (0.0 < self.damping_cap <= 1.0):
+            raise InputError(f"damping_cap {self.damping_cap}: use 0 .. 1 (x m / (dt degree))")
+        if not (0.0 <= self.friction <= 2.0):
+            raise InputError(f"friction scale {self.friction}: use 0 .. 2")
+
+
+@dataclass(frozen=True)
+class Tuning:
+    """Every stage's tuning, and what they share."""
+
+    cloth: ClothParams = ClothParams()
+    sew: SewTuning = SewTuning()
+    drape: DrapeTuning = DrapeTuning()
+    walk: WalkTuning = WalkTuning()
+    collide_every: int | None = None  # steps between collision checks in every stage (None: each stage's rule)
+    observe_every: float = 0.02  # s of simulated time between the cloth's updates to a live view
+
+    def validate(self) -> None:
+        k = self.collide_every
+        if k is not None and not (isinstance(k, int) and 1 <= k <= 16):
+            raise InputError(f"collide_every {k}: check collisions every 1 .. 16 steps")
+        self.sew.validate()
+        self.drape.validate()
+        self.walk.validate()
+
