@@ -128,7 +128,9 @@ def _run(req: dict, out: Path, progress, live=None) -> dict:
         track = load_animation(b["animation"], float(b.get("fps", 30.0)))
         body = track.body
     else:
-        body = resolve_body(b["spec"] if "spec" in b else b["file"])
+        from engine.scene.arms import clear_hands
+
+        body = clear_hands(resolve_body(b["spec"] if "spec" in b else b["file"]))
     g = req["garment"]
     fabric = req.get("fabric", "cotton")
     walking = req.get("motion", "none") == "walk"

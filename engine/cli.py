@@ -55,6 +55,17 @@ def _body(spec: str, up: Optional[str], front: Optional[str]):
     return body
 
 
+def _dressable(spec: str, up: Optional[str], front: Optional[str]):
+    """_body, with the hands moved off the hips where they touch them (engine.scene.arms.clear_hands)."""
+    from engine.scene.arms import clear_hands
+
+    loaded = _body(spec, up, front)
+    body = clear_hands(loaded)
+    if body is not loaded:
+        typer.echo(f"note: {body.notes[-1]}", err=True)
+    return body
+
+
 @body_app.command("info")
 def body_info(
     body: str = typer.Argument(..., help=BODY_HELP),
@@ -172,7 +183,7 @@ def drape_cmd(
 
         request = TryOnRequest.of(garment=garment, size=size, fabric=fabric, resolution_cm=resolution, texel_mm=texel,
                                   collision=collision, dt_ms=dt, force_dt=force_dt, velocity_mode=velocity_mode)
-        b = _body(body, up, front)
+        b = _dressable(body, up, front)
         prog, update = _progress_printer()
         with prog:
             try:
@@ -262,7 +273,7 @@ def walk_cmd(
             for line in track.notes:
                 typer.echo(f"note: {line}", err=True)
         else:
-            b = _body(body, up, front)
+            b = _dressable(body, up, front)
         walker = b if track is not None else walking_body(b)
         if walker is not b:  # a scan: the default body's skeleton and weights were fitted to it
             typer.echo(f"note: {walker.notes[-1]}", err=True)

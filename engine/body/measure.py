@@ -205,6 +205,8 @@ class Measurements:
     arm_root: float = float("nan")  # ARM_ROOT_BELOW under the armpits: the mean perimeter (convex
     # hull) of the two arms' horizontal cuts -- oblique on an arm held out, so larger than the
     # arm's girth; how thick the arm is where an armhole goes round it
+    hand_gap: float = float("nan")  # the smallest gap between an arm hanging below the waist and
+    # the torso or legs beside it (0 where they touch or overlap; NaN: no arm reaches there)
     notes: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict:
@@ -361,6 +363,7 @@ def _measure(body) -> Measurements:
                        "and where the seams beside the arms do not close, sewn again with the arms raised "
                        "and then lowered (slower)")
     _torso_girths(prof, h, crotch, armpit, m)
+    m.hand_gap = _hand_gap(prof, armpit, m.waist_height)
     _knee(prof, h, crotch, m)
     acromion = _shoulders(v, f, prof, h, armpit, m)
     if acromion is not None:
@@ -648,21 +651,54 @@ def _arm_pieces(prof: _Profile, pieces: list[Piece], core: Piece | None, side: f
     return [p for p in pieces if all(p is not q for q in skip) and side * (p.centroid[0] - prof.ax) > 0]
 
 
+ARM_STEP = 0.06  # m: an arm's cut is within this of the one above it (horizontally)
+
+
+def _arm_cuts(prof: _Profile, armpit: float, side: float) -> list[tuple[int, list[Piece]]]:
+    """(cut index, the arm's pieces) from the armpit down to where the arm ends: each cut's
+    arm pieces (_arm_pieces) near the arm's centre in the cut above (ARM_STEP: a leg's cut
+    appearing beside a hanging hand at the crotch is not the arm)."""
+    out, last = [], None
+    for i in prof.index_range(0.0, armpit - 0.005)[::-1]:  # from the armpit downwards
+        arm = _arm_pieces(prof, prof.cuts[i], prof.central[i], side)
+        if last is not None:
+            arm = [p for p in arm if np.linalg.norm(p.centroid - last) < ARM_STEP]
+        if not arm:
+            if out:
+                break
+            continue
+        w = np.array([p.length for p in arm])
+        last = (np.array([p.centroid for p in arm]) * w[:, None]).sum(axis=0) / w.sum()
+        out.append((i, arm))
+    return out
+
+
 def _hanging_arm(prof: _Profile, armpit: float, side: float) -> tuple[np.ndarray, np.ndarray]:
     """(centres (K, 3), hull perimeters (K,)) of the arm's horizontal cuts from the armpit down
     to where the arm ends."""
     cents, widths = [], []
-    for i in prof.index_range(0.0, armpit - 0.005)[::-1]:  # from the armpit downwards
-        arm = _arm_pieces(prof, prof.cuts[i], prof.central[i], side)
-        if not arm:
-            if cents:
-                break
-            continue
+    for i, arm in _arm_cuts(prof, armpit, side):
         w = np.array([p.length for p in arm])
         c = (np.array([p.centroid for p in arm]) * w[:, None]).sum(axis=0) / w.sum()
         cents.append([c[0], prof.ys[i], c[1]])
         widths.append(hull_perimeter(np.vstack([p.points for p in arm])))
     return np.array(cents).reshape(-1, 3), np.array(widths)
+
+
+def _hand_gap(prof: _Profile, armpit: float, waist: float) -> float:
+    """The smallest distance between the points of an arm's cut below the waist and those of
+    the other pieces of the cut (torso, legs), on either side (measure's hand_gap)."""
+    from scipy.spatial import cKDTree
+
+    gap = np.inf
+    for side in (-1.0, 1.0):
+        for i, arm in _arm_cuts(prof, armpit, side):
+            rest = [p for p in prof.cuts[i] if all(p is not q for q in arm)]
+            if prof.ys[i] > waist or not rest:
+                continue
+            d, _ = cKDTree(np.vstack([p.points for p in rest])).query(np.vstack([p.points for p in arm]))
+            gap = min(gap, float(d.min()))
+    return gap if np.isfinite(gap) else float("nan")
 
 
 def _held_out_arm(v: np.ndarray, f: np.ndarray, acromion: np.ndarray, side: float) -> tuple[np.ndarray, np.ndarray]:

@@ -334,26 +334,33 @@ def write_walk_outputs(out, body: Body, walk: WalkResult, report: dict, panels: 
 
     from engine.io.anim import write_anim_glb
     from engine.io.export import BODY_RGBA, GARMENT_RGBA
-    from engine.io.render import BODY_RGB, render_meshes
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tr, gf = walk.track, walk.garment_frames
-    n = len(gf)
-    body_frames = np.stack([tr.vertices(i).astype(np.float32) for i in range(n)])
+    body_frames = np.stack([tr.vertices(i).astype(np.float32) for i in range(len(gf))])
     paths = [write_anim_glb(out / "anim.glb", [("body", body.faces, body_frames, BODY_RGBA),
                                               ("garment", walk.triangles, gf, GARMENT_RGBA)], fps=tr.fps)]
-    picks = np.unique(np.linspace(0, n - 1, panels).round().astype(int))
-    imgs = []
-    for i in picks:
-        off = np.array([0.0, 0.0, tr.offset(int(i))[2]])  # each panel centred on the walker
-        imgs.append(render_meshes([(body_frames[i] - off, body.faces, BODY_RGB),
-                                   (gf[i] - off, walk.triangles, (0.27, 0.43, 0.75))], size=size, view="side"))
-    h = min(im.shape[0] for im in imgs)
     p = out / "strip.png"
-    Image.fromarray(np.concatenate([im[:h] for im in imgs], axis=1)).save(p)
+    Image.fromarray(walk_strip(body, walk, panels, size)).save(p)
     paths.append(p)
     p = out / "report.json"
     p.write_text(json.dumps(report, indent=2))
     paths.append(p)
     return paths
+
+
+def walk_strip(body: Body, walk: WalkResult, panels: int = 8, size: int = 420) -> np.ndarray:
+    """(size, W, 3) uint8: side views of `panels` frames across the walk, each centred on the
+    walker, side by side."""
+    from engine.io.render import BODY_RGB, render_meshes
+
+    tr, gf = walk.track, walk.garment_frames
+    picks = np.unique(np.linspace(0, len(gf) - 1, panels).round().astype(int))
+    imgs = []
+    for i in picks:
+        off = np.array([0.0, 0.0, tr.offset(int(i))[2]])  # each panel centred on the walker
+        imgs.append(render_meshes([(tr.vertices(int(i)) - off, body.faces, BODY_RGB),
+                                   (gf[i] - off, walk.triangles, (0.27, 0.43, 0.75))], size=size, view="side"))
+    h = min(im.shape[0] for im in imgs)
+    return np.concatenate([im[:h] for im in imgs], axis=1)
