@@ -1,7 +1,7 @@
 """Load a body scan (OBJ, PLY, STL, OFF, GLB/glTF) and normalise it to the world frame of
 DESIGN.md: metres, Y up, facing +Z, feet on y = 0, centred on x = z = 0 (bounding-box centre).
 
-Units come from a plausible human height; the up axis from the shape (standing human: the long
+Units come from a plausible human height (metres, dm, cm, mm or inches; an adult's where two fit); the up axis from the shape (standing human: the long
 axis; the end with the flat soles is down); the front from the feet (toes point forward) and the
 face. Messy scans are repaired (duplicate vertices merged, degenerate faces and tiny floating
 bits dropped, holes closed, a floor plate under the feet dropped) and every decision is
@@ -31,8 +31,10 @@ from engine.errors import InputError
 
 SUPPORTED = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0), "-z": (2, -1.0)}
-UNITS = ((1.0, "metres"), (0.1, "decimetres"), (0.01, "centimetres"), (0.001, "millimetres"))
-HUMAN_HEIGHT = (0.5, 2.5)  # m; the unit scales give non-overlapping raw ranges
+UNITS = ((1.0, "metres"), (0.1, "decimetres"), (0.01, "centimetres"), (0.001, "millimetres"), (0.0254, "inches"))
+HUMAN_HEIGHT = (0.5, 2.5)  # m; the metric scales give non-overlapping raw ranges ...
+ADULT_HEIGHT = (1.3, 2.3)  # m: ... inches overlap centimetres (70 units: 1.78 m or 0.70 m): the adult
+# wins, and inches are taken for adults only
 DEFAULT_MAX_TRIANGLES = 2_000_000
 TINY_PIECE = 0.01  # drop components under this fraction of the total surface area
 
@@ -162,10 +164,12 @@ def _read(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _units(extent: float, name: str) -> tuple[float, str]:
-    for scale, unit in UNITS:
-        if HUMAN_HEIGHT[0] <= extent * scale <= HUMAN_HEIGHT[1]:
-            return scale, unit
-    raise InputError(f"{name} is not human-sized: {extent:.4g} units tall fits no unit (m, dm, cm, mm) "
+    fits = [(scale, unit) for scale, unit in UNITS if HUMAN_HEIGHT[0] <= extent * scale <= HUMAN_HEIGHT[1]]
+    adult = [(scale, unit) for scale, unit in fits if ADULT_HEIGHT[0] <= extent * scale <= ADULT_HEIGHT[1]]
+    fits = [(scale, unit) for scale, unit in fits if unit != "inches"]  # inches only for an adult
+    if adult or fits:
+        return (adult or fits)[0]
+    raise InputError(f"{name} is not human-sized: {extent:.4g} units tall fits no unit (m, dm, cm, mm, inches) "
                      f"for a {HUMAN_HEIGHT[0]}-{HUMAN_HEIGHT[1]} m person: check the file or its scale")
 
 

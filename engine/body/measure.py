@@ -345,13 +345,13 @@ def _measure(body) -> Measurements:
     prof = _Profile(v, f, ax)
 
     crotch = _find_crotch(prof, h, m)
-    if not np.isfinite(crotch):
-        return m
+    if not np.isfinite(crotch):  # legs together: the girths below it go round both
+        crotch = _estimated(m, "crotch height", PROPORTIONS["crotch"] * h)
     m.crotch_height = m.inseam = crotch
 
     armpit = _find_armpit(prof, h, crotch, m)
-    if not np.isfinite(armpit):
-        return m
+    if not np.isfinite(armpit):  # arms pressed to the torso all along: its girths take them in
+        armpit = _estimated(m, "armpit height", PROPORTIONS["armpit"] * h)
 
     m.armpit_height = armpit
     m.arm_gap = _arm_gap(prof, armpit - ARM_GAP_BELOW)
@@ -368,7 +368,21 @@ def _measure(body) -> Measurements:
     acromion = _shoulders(v, f, prof, h, armpit, m)
     if acromion is not None:
         _arms(v, f, prof, armpit, acromion, m)
+    else:
+        m.shoulder_height = _estimated(m, "shoulder height", armpit + PROPORTIONS["shoulder_over_armpit"] * h)
     return m
+
+
+# Where a landmark is not found, its height is estimated from the stature (and the armpits), so that
+# what needs it (a garment's placement) can go on; the notes say which. Measured: crotch 0.46-0.48
+# x height (default bodies, the sample scan; GarmentCode's SMPL body 0.43), armpits 0.75-0.76,
+# shoulders 0.07-0.08 above the armpits
+PROPORTIONS = {"crotch": 0.46, "armpit": 0.755, "shoulder_over_armpit": 0.075}
+
+
+def _estimated(m: Measurements, what: str, value: float) -> float:
+    m.notes.append(f"{what} estimated as {100 * value:.1f} cm from the stature (not found: see above)")
+    return float(value)
 
 
 def _find_crotch(prof: _Profile, h: float, m: Measurements) -> float:
@@ -376,13 +390,14 @@ def _find_crotch(prof: _Profile, h: float, m: Measurements) -> float:
     idx = prof.index_range(0.3 * h, 0.65 * h)
     has_central = np.array([prof.central[i] is not None for i in idx])
     if len(idx) == 0 or has_central.all() or not has_central.any():
-        m.notes.append("could not find the crotch (legs not separated?): lower-body measures skipped")
+        m.notes.append("could not find the crotch: the legs are not apart from each other (a scan with the legs "
+                       "together, or a long skirt)")
         return float("nan")
     # Scan down from the top of the window: the first cut without a central piece.
     top_true = np.nonzero(has_central)[0].max()
     below = [k for k in range(top_true, -1, -1) if not has_central[k]]
     if not below:
-        m.notes.append("could not find the crotch: lower-body measures skipped")
+        m.notes.append("could not find the crotch: no cut where the legs are apart")
         return float("nan")
     k = below[0]
     y_false = prof.ys[idx[k]]
@@ -405,7 +420,8 @@ def _find_armpit(prof: _Profile, h: float, crotch: float, m: Measurements) -> fl
         drop = width < 0.8 * above.max(axis=0)
     ks = np.nonzero(drop)[0]
     if len(ks) == 0:
-        m.notes.append("could not find the armpits: upper-body measures skipped")
+        m.notes.append("could not find the armpits: the torso does not narrow under the arms anywhere (arms pressed "
+                       "to the torso all along?); the chest and waist may take the arms in")
         return float("nan")
     k = ks.max()
     j = 1 + int(np.argmax(above[:, k]))

@@ -199,7 +199,8 @@ def recommend_size(name: str, body: Body, m=None) -> str:
     have = {k: 100 * getattr(m, k) for k in FIT_GIRTHS[name]}
     bad = [k for k, v in have.items() if not np.isfinite(v)]
     if bad:
-        raise InputError(f"the body's {', '.join(bad)} could not be measured, so no size can be chosen "
+        why = f" ({'; '.join(m.notes)})" if m.notes else ""
+        raise InputError(f"the body's {', '.join(bad)} could not be measured{why}, so no size can be chosen "
                          "for it: give one (--size M)")
 
     def covers(i: int, g: str) -> float:  # the largest girth g size i fits: half a step past its own
@@ -226,7 +227,8 @@ def _fit(body: Body, size: str) -> Fit:
             "crotch_height": m.crotch_height, "knee_height": m.knee_height}
     bad = [k for k, v in need.items() if not np.isfinite(v)]
     if bad:
-        raise InputError(f"the body's landmarks ({', '.join(bad)}) could not be measured; catalogue "
+        why = f" ({'; '.join(m.notes)})" if m.notes else ""
+        raise InputError(f"the body's landmarks ({', '.join(bad)}) could not be measured{why}; catalogue "
                          "garments need them to be placed (check `tryon body info`)")
     sw = m.shoulder_width if np.isfinite(m.shoulder_width) else 0.21 * m.height
     underarm = m.shoulder_height - (SCYE_MEN if chart is MEN else SCYE_WOMEN) * m.height
