@@ -151,8 +151,8 @@ def _simulate(req, body, g, fabric, walking, out, progress, view, track=None) ->
 
     retry = [""]  # while --size auto dresses a larger size, every progress message says why
 
-    def note(size, why, larger):
-        retry[0] = f"size {size} came out too small, trying {larger} -- "
+    def note(size, why, other):
+        retry[0] = f"size {size} did not fit, trying {other} -- "
 
     catalogue = "name" in g
     request = TryOnRequest(garment=g["name"] if catalogue else g["file"],

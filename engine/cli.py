@@ -136,8 +136,15 @@ def render_cmd(
     _run(go)
 
 
-def _size_note(size: str, why: str, larger: str) -> None:
-    typer.echo(f"note: size {size} came out too small ({why}); trying {larger}", err=True)
+SIZE_HELP = ("Catalogue size: XS, S, M, L, XL, XXL (default M), on the women's or men's chart: a default body's "
+             "own, any other body's by the sex its shape reads; or auto: the smallest size whose chart girths "
+             "cover the body's, then by draping: the next larger while it comes out too small (refused, or tight: "
+             "stretched past the fabric's limit + 1 %), up to two more, the next smaller while it slides down the "
+             "body; when none fits, the report says so.")
+
+
+def _size_note(size: str, why: str, other: str) -> None:
+    typer.echo(f"note: size {size} did not fit ({why}); trying {other}", err=True)
 
 
 def _progress_printer():
@@ -159,7 +166,7 @@ def drape_cmd(
     body: str = typer.Option(..., "--body", help=BODY_HELP),
     garment: str = typer.Option(..., "--garment", help="A catalogue garment (see `tryon garments`) or a "
                                 "GarmentCode pattern file (.json)."),
-    size: Optional[str] = typer.Option(None, "--size", help="Catalogue size: XS, S, M, L, XL, XXL (default M), on the women's or men's chart: a default body's own, any other body's by its waist-to-hip ratio; or auto: the smallest size whose chart girths cover the body's, and if that drapes too small (refused, or tight: stretched past the fabric's limit + 1 %), the next larger, up to two more."),
+    size: Optional[str] = typer.Option(None, "--size", help=SIZE_HELP),
     fabric: str = typer.Option("cotton", "--fabric", help="cotton, denim, silk or jersey."),
     out: Path = typer.Option(Path("out/drape"), "--out", help="Output directory."),
     resolution: float = typer.Option(1.5, "--resolution", help="Cloth edge length in cm."),
@@ -225,7 +232,7 @@ def walk_cmd(
     body: str = typer.Option(..., "--body", help=BODY_HELP),
     garment: str = typer.Option(..., "--garment", help="A catalogue garment (see `tryon garments`) or a "
                                 "GarmentCode pattern file (.json)."),
-    size: Optional[str] = typer.Option(None, "--size", help="Catalogue size: XS, S, M, L, XL, XXL (default M), on the women's or men's chart: a default body's own, any other body's by its waist-to-hip ratio; or auto: the smallest size whose chart girths cover the body's, and if that drapes too small (refused, or tight: stretched past the fabric's limit + 1 %), the next larger, up to two more."),
+    size: Optional[str] = typer.Option(None, "--size", help=SIZE_HELP),
     fabric: str = typer.Option("cotton", "--fabric", help="cotton, denim, silk or jersey."),
     seconds: float = typer.Option(4.0, "--seconds", help="How long to walk (s), after dressing."),
     fps: float = typer.Option(30.0, "--fps", help="Body frames (and output frames) per second; an uploaded .zip of OBJ frames plays at this rate, an animated .glb is sampled at it."),

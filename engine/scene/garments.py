@@ -108,10 +108,11 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
     first; if it comes out too small -- its drape refused it (seams that cannot close, cloth
     stretched past DrapeOptions.too_tight) or ended tight (report["tight"]) -- the next larger
     size is dressed, up to AUTO_TRIES more (measured: the sample scan's fuller bust leaves its
-    L dress at 11-22 % strain, its XL dress at 5.9 %). The report's `sizes_tried` lists the
-    sizes found too small and why; `note(size, why, next size)` is called before each retry.
-    When every size tried is too small, the least stretched tight result is returned (its
-    warnings say so), or the last refusal raised. Other sizes and pattern files are dressed
+    L dress at 11-22 % strain, its XL dress at 5.9 %); if it comes out too large (slid down the
+    body), the next smaller (_dress_auto). The report's `sizes_tried` lists the sizes that did
+    not fit and why; `note(size, why, next size)` is called before each retry. When no size
+    fits, the closest result is returned with a warning naming each size tried and why, or the
+    last refusal raised. Other sizes and pattern files are dressed
     once; a too-small error then names the size auto would pick (add_size_hint). Seams beside
     the arms that cannot close on a body whose arms hang close to its torso, or cloth beside
     them left too stretched (arms_in_the_way, beside_the_arms): the same size is dressed again
@@ -172,33 +173,64 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
         except SimulationError as e:
             add_size_hint(e, arg, body, size)  # (only a too-small error; not the arms in the way)
             raise
-    first = SIZES.index(recommend_size(arg, body))
-    sizes = SIZES[first:first + 1 + AUTO_TRIES]
+    return _dress_auto(arg, body, attempt, note)
+
+
+def _verdict(report: dict) -> str:
+    """'fits', 'small' (ended tight) or 'large' (slid down the body) for a drape that ended."""
+    if report.get("tight"):
+        return "small"
+    if any(w.startswith("the garment slid") for w in report.get("warnings", [])):
+        return "large"
+    return "fits"
+
+
+def _dress_auto(arg: str, body: Body, attempt, note=None):
+    """--size auto (dress_in_size): from the size the body's girths choose, one size larger while
+    it comes out too small (refused, or tight) -- up to AUTO_TRIES larger --, one smaller while it
+    comes out too large (slid down the body, or slid off it), never a size twice. A size that
+    fits is returned; when none does, the drape that came closest (a tight one before one that
+    slid) with a warning naming every size tried and why, or the last refusal raised."""
+    from engine.errors import SimulationError
+    from engine.pattern.catalogue import SIZES, make_garment, recommend_size
+
+    first = i = SIZES.index(recommend_size(arg, body))
     tried: list[dict] = []
-    tight = None  # the least stretched tight result so far: (result, report, size)
-    for k, s in enumerate(sizes):
+    ended: dict[str, tuple] = {}  # size -> (result, report, verdict, size) of drapes that ended
+    error = None
+    while True:
+        s = SIZES[i]
         how = "chosen from the body's girths" if not tried else \
-            f"chosen by draping: {', '.join(t['size'] for t in tried)} too small"
+            f"chosen by draping: {', '.join(t['size'] + ' too ' + t['verdict'] for t in tried)}"
         try:
             res, report = attempt(lambda b: make_garment(arg, b, s), lambda name: name[:-1] + f", {how})")
         except SimulationError as e:
-            if not getattr(e, "too_small", False):
+            verdict = {(True, False): "small", (False, True): "large"}.get(
+                (getattr(e, "too_small", False), getattr(e, "too_large", False)))
+            if verdict is None:
                 raise
-            if k == len(sizes) - 1 and tight is None:
-                e.args = (f"{e} (--size auto tried {', '.join([t['size'] for t in tried] + [s])})",) \
-                    + tuple(e.args[1:])
-                raise
-            why = str(e)
+            why, error = str(e), e
         else:
+            verdict = _verdict(report)
             report["sizes_tried"] = list(tried)
-            if not report.get("tight"):
+            if verdict == "fits":
                 return res, report
-            why = f"tight: stretched {100 * report['strain']['max']:.0f} %"
-            if tight is None or report["strain"]["max"] < tight[1]["strain"]["max"]:
-                tight = (res, report, s)
-        tried.append({"size": s, "error": why})
-        if k < len(sizes) - 1 and note is not None:
-            note(s, why, sizes[k + 1])
-    res, report, s = tight
+            ended[s] = (res, report, verdict, s)
+            why = (f"tight: stretched {100 * report['strain']['max']:.0f} %" if verdict == "small" else
+                   next(w for w in report["warnings"] if w.startswith("the garment slid")))
+        tried.append({"size": s, "verdict": verdict, "error": why})
+        nxt = i + 1 if verdict == "small" else i - 1
+        if not 0 <= nxt < len(SIZES) or SIZES[nxt] in {t["size"] for t in tried} or nxt > first + AUTO_TRIES:
+            break
+        if note is not None:
+            note(s, why, SIZES[nxt])
+        i = nxt
+    summary = "; ".join(f"{t['size']} too {t['verdict']} ({t['error']})" for t in tried)
+    if not ended:
+        error.args = (f"{error} (--size auto tried {', '.join(t['size'] for t in tried)})",) + tuple(error.args[1:])
+        raise error
+    tight = [v for v in ended.values() if v[2] == "small"]
+    res, report, _, s = min(tight, key=lambda v: v[1]["strain"]["max"]) if tight else list(ended.values())[-1]
     report["sizes_tried"] = [t for t in tried if t["size"] != s]
+    report.setdefault("warnings", []).append(f"no size fits this body well: {summary}")
     return res, report
