@@ -136,13 +136,6 @@ def render_cmd(
     _run(go)
 
 
-SIZE_HELP = ("Catalogue size: XS, S, M, L, XL, XXL (default M), on the women's or men's chart: a default body's "
-             "own, any other body's by the sex its shape reads; or auto: the smallest size whose chart girths "
-             "cover the body's, then by draping: the next larger while it comes out too small (refused, or tight: "
-             "stretched past the fabric's limit + 1 %), up to two more, the next smaller while it slides down the "
-             "body; when none fits, the report says so.")
-
-
 def _size_note(size: str, why: str, other: str) -> None:
     typer.echo(f"note: size {size} did not fit ({why}); trying {other}", err=True)
 
@@ -161,35 +154,63 @@ def _progress_printer():
     return prog, update
 
 
+# the request's fields by their options here (engine.scene.request.TryOnRequest)
+OPTION_NAMES = {"resolution_cm": "--resolution", "texel_mm": "--texel", "dt_ms": "--dt",
+                "reuse_maps": "--reuse-maps/--maps-every-frame", "walk_stiffness": "--walk-stiffness"}
+DRESSING = ("garment", "size", "fabric", "resolution_cm", "texel_mm", "collision", "velocity_mode")
+WALKING = ("seconds", "fps", "speed", "stride", "in_place", "walk_stiffness", "reuse_maps")
+
+
+def request_options(fields: tuple[str, ...]):
+    """A command whose options include these fields of TryOnRequest -- their types, defaults and
+    help from the model -- handed to it as one TryOnRequest (its `request` parameter)."""
+    import functools
+    import inspect
+
+    from engine.scene.request import TryOnRequest
+
+    def option(name):
+        f = TryOnRequest.model_fields[name]
+        kind = {bool: bool, int: int, float: float}.get(f.annotation, str)  # (a Literal: checked by the model)
+        if f.annotation in (float | None, str | None):
+            kind = Optional[float] if f.annotation == float | None else Optional[str]
+        flag = OPTION_NAMES.get(name, "--" + name.replace("_", "-"))
+        default = ... if f.is_required() else f.default
+        return inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, annotation=kind,
+                                 default=typer.Option(default, flag,
+                                                      help=f.description))
+
+    def wrap(fn):
+        own = [q for q in inspect.signature(fn).parameters.values() if q.name != "request"]
+        params = own + [option(n) for n in fields]
+
+        @functools.wraps(fn)
+        def command(**kw):
+            values = {n: kw.pop(n) for n in fields}
+            values["motion"] = "walk" if "seconds" in fields else "none"
+            names = {n: OPTION_NAMES.get(n, "--" + n.replace("_", "-")).split("/")[0] for n in fields}
+            return fn(request=_run(lambda: TryOnRequest.of(names, **values)), **kw)
+
+        command.__signature__ = inspect.Signature(params)
+        command.__annotations__ = {q.name: q.annotation for q in params}
+        return command
+
+    return wrap
+
+
 @app.command("drape")
-def drape_cmd(
-    body: str = typer.Option(..., "--body", help=BODY_HELP),
-    garment: str = typer.Option(..., "--garment", help="A catalogue garment (see `tryon garments`) or a "
-                                "GarmentCode pattern file (.json)."),
-    size: Optional[str] = typer.Option(None, "--size", help=SIZE_HELP),
-    fabric: str = typer.Option("cotton", "--fabric", help="cotton, denim, silk or jersey."),
-    out: Path = typer.Option(Path("out/drape"), "--out", help="Output directory."),
-    resolution: float = typer.Option(1.5, "--resolution", help="Cloth edge length in cm."),
-    texel: float = typer.Option(5.0, "--texel", help="Collision map texel in mm (seed 003 §5.4: 5 mm)."),
-    collision: str = typer.Option("image", "--collision", help="image (depth/normal maps) or object (BVH)."),
-    dt: Optional[float] = typer.Option(None, "--dt", help="Time step in ms (default: the eq. 4 bound)."),
-    force_dt: bool = typer.Option(False, "--force-dt", help="Allow a time step above the eq. 4 bound."),
-    velocity_mode: str = typer.Option("average", "--velocity-mode",
-                                      help="Super-elasticity rule: zero (seed 003), average (eq. 5), "
-                                      "directional (eq. 6) or provot (position modification)."),
-    up: Optional[str] = typer.Option(None, "--up", help=UP_HELP),
-    front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP),
-):
+@request_options(DRESSING + ("dt_ms", "force_dt"))
+def drape_cmd(request, body: str = typer.Option(..., "--body", help=BODY_HELP),
+              out: Path = typer.Option(Path("out/drape"), "--out", help="Output directory."),
+              up: Optional[str] = typer.Option(None, "--up", help=UP_HELP),
+              front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP)):
     """Dress a standing body: mesh the pattern, place it, sew, drape; write scene.glb, garment.obj,
     front/side/back.png, report.json and the pattern dressed (pattern.json, pattern.svg)."""
 
     def go():
         from engine.errors import SimulationError
-        from engine.scene.request import TryOnRequest
         from engine.scene.tryon import dress_request, write_outputs
 
-        request = TryOnRequest.of(garment=garment, size=size, fabric=fabric, resolution_cm=resolution, texel_mm=texel,
-                                  collision=collision, dt_ms=dt, force_dt=force_dt, velocity_mode=velocity_mode)
         b = _dressable(body, up, front)
         prog, update = _progress_printer()
         with prog:
@@ -228,54 +249,27 @@ def _failed_picture(out: Path, b, e) -> None:
 
 
 @app.command("walk")
-def walk_cmd(
-    body: str = typer.Option(..., "--body", help=BODY_HELP),
-    garment: str = typer.Option(..., "--garment", help="A catalogue garment (see `tryon garments`) or a "
-                                "GarmentCode pattern file (.json)."),
-    size: Optional[str] = typer.Option(None, "--size", help=SIZE_HELP),
-    fabric: str = typer.Option("cotton", "--fabric", help="cotton, denim, silk or jersey."),
-    seconds: float = typer.Option(4.0, "--seconds", help="How long to walk (s), after dressing."),
-    fps: float = typer.Option(30.0, "--fps", help="Body frames (and output frames) per second; an uploaded .zip of OBJ frames plays at this rate, an animated .glb is sampled at it."),
-    speed: float = typer.Option(1.2, "--speed", help="Walking speed in m/s (1.2 is a normal walk)."),
-    stride: Optional[float] = typer.Option(None, "--stride", help="Stride (two steps) in m; default 0.82 x height."),
-    in_place: bool = typer.Option(False, "--in-place", help="Walk on the spot (a treadmill) instead of forward."),
-    out: Path = typer.Option(Path("out/walk"), "--out", help="Output directory."),
-    resolution: float = typer.Option(1.5, "--resolution", help="Cloth edge length in cm."),
-    texel: float = typer.Option(5.0, "--texel", help="Collision map texel in mm."),
-    reuse_maps: bool = typer.Option(True, "--reuse-maps/--maps-every-frame",
-                                    help="Render one walk cycle of maps and reuse it, or render every frame."),
-    velocity_mode: str = typer.Option("average", "--velocity-mode",
-                                      help="Super-elasticity rule while walking: average (eq. 5), directional "
-                                      "(eq. 6; not yet stable) or zero."),
-    collision: str = typer.Option("image", "--collision", help="image (depth/normal/velocity maps) or object (BVH)."),
-    stiffness: float = typer.Option(0.25, "--walk-stiffness",
-                                    help="Stretch and shear springs while walking, x the drape's (0.01-1): softer "
-                                    "springs take a longer eq. 4 step; a frame whose strain passes the fabric's "
-                                    "threshold + 10 % doubles them (up to 1) for the rest of the walk."),
-    up: Optional[str] = typer.Option(None, "--up", help=UP_HELP),
-    front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP),
-):
+@request_options(DRESSING + WALKING)
+def walk_cmd(request, body: str = typer.Option(..., "--body", help=BODY_HELP),
+             out: Path = typer.Option(Path("out/walk"), "--out", help="Output directory."),
+             up: Optional[str] = typer.Option(None, "--up", help=UP_HELP),
+             front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP)):
     """Dress a body (as `tryon drape`), then walk it: write anim.glb (plays in any glTF viewer),
     strip.png (frames side by side) and report.json. BODY may also be an animation: a .zip of OBJ
     frames (one mesh topology) played at --fps, or a .glb with a morph-target or skinned animation
     sampled at --fps; the garment is dressed on its first frame."""
 
     def go():
-        from engine.scene.request import TryOnRequest
         from engine.scene.tryon import dress_request, write_pattern
         from engine.scene.walk import walk_cloth, walk_report, walking_body, write_walk_outputs
 
-        request = TryOnRequest.of(garment=garment, size=size, fabric=fabric, resolution_cm=resolution, texel_mm=texel,
-                                  collision=collision, velocity_mode=velocity_mode, motion="walk", seconds=seconds,
-                                  fps=fps, speed=speed, stride=stride, in_place=in_place, walk_stiffness=stiffness,
-                                  reuse_maps=reuse_maps)
         track = None
         from engine.body.gltf_anim import has_animation
 
         if body.lower().endswith(".zip") or has_animation(body):  # an uploaded animation: its own motion
             from engine.body.animation import load_animation
 
-            track = load_animation(Path(body), fps, up=up, front=front)
+            track = load_animation(Path(body), request.fps, up=up, front=front)
             b = track.body
             for line in track.notes:
                 typer.echo(f"note: {line}", err=True)

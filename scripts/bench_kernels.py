@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit
 
 from engine.body import resolve_body
-from engine.cloth import kernels as K
+from engine.cloth import kernels_strain as KS
 from engine.collide.maps import render_body_maps
 from engine.collide.query import query_batch_serial
 
@@ -36,11 +36,11 @@ def main() -> None:
     x = rng.normal(size=(n, 3))
     v0 = rng.normal(size=(n, 3))
     rest = np.linalg.norm(x[springs[:, 1]] - x[springs[:, 0]], axis=1) * 0.9
-    args = (springs, rest, np.ones(s, np.bool_), 0.05, K.VM_AVERAGE, np.array([0, -9.81, 0.0]), 1e-4,
+    args = (springs, rest, np.ones(s, np.bool_), 0.05, KS.VM_AVERAGE, np.array([0, -9.81, 0.0]), 1e-4,
             np.zeros((n, 3)), 12, np.zeros(s, np.int32), np.zeros((s, 4)), np.zeros((s, 2), np.int32), 0.002)
     print(f"{'kernel':<28}{'plain @njit':>14}{'serial_kernel':>16}{'speed-up':>10}")
     out = {}
-    for name, fn in (("plain", njit(fastmath=True)(K.modify_velocities.py_func)), ("serial", K.modify_velocities)):
+    for name, fn in (("plain", njit(fastmath=True)(KS.modify_velocities.py_func)), ("serial", KS.modify_velocities)):
         v = v0.copy()
         out[name] = (_time(lambda: fn(x, v0.copy(), *args)), fn(x, v, *args), v)
     assert np.array_equal(out["plain"][2], out["serial"][2])

@@ -6,6 +6,7 @@ import pytest
 
 from engine.body import resolve_body
 from engine.body.types import SEGMENTS
+from engine.scene.request import TryOnOptions
 from tests.samples import write_arms_lowered_scan
 
 
@@ -71,7 +72,7 @@ def test_a_lift_needs_the_image_space_collision(arms30, lift):
 
     spec, place, name = resolve_garment("dress", lift.raised, "M")
     with pytest.raises(InputError, match="needs the image-space collision"):
-        run_tryon(arms30, spec, place=place, source=name, collision="object", lift=lift)
+        run_tryon(arms30, spec, TryOnOptions(collision="object"), place=place, source=name, lift=lift)
 
 
 @pytest.mark.slow  # ~30 s here, ~50 s on CI: the default run stays under 10 minutes
@@ -92,7 +93,7 @@ def test_a_coarse_shirt_is_dressed_with_the_arms_raised_and_lowered(arms30, lift
         if bv is not None:
             shown.append((stage, float(np.ptp(bv[:, 0]))))
 
-    res, rep = run_tryon(arms30, spec, h=0.03, place=place, source=name, lift=lift, observer=observer)
+    res, rep = run_tryon(arms30, spec, TryOnOptions(resolution_cm=3.0), place=place, source=name, lift=lift, observer=observer)
     width_raised, width_loaded = np.ptp(lift.raised.vertices[:, 0]), np.ptp(arms30.vertices[:, 0])
     assert shown[0] == ("sewing", pytest.approx(width_raised))
     lowering = [w for stage, w in shown if stage == "lowering arms"]

@@ -9,7 +9,8 @@ import pytest
 from engine.body import resolve_body
 from engine.errors import InputError
 from engine.pattern import geometry as geo
-from engine.pattern.catalogue import BUST_SHIFT, CATALOGUE, SIZES, make_garment
+from engine.garment.catalogue import make_garment
+from engine.pattern.catalogue import BUST_SHIFT, CATALOGUE, SIZES
 from engine.pattern.validate import check
 
 

@@ -9,15 +9,24 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from engine.cloth import kernels as K
+from engine.cloth import kernels_carry as KR
+from engine.cloth import kernels_contact as KC
+from engine.cloth import kernels_integrate as KI
+from engine.cloth import kernels_strain as KS
+from engine.cloth import passes
+from engine.cloth.buffers import limits2
+from engine.cloth.config import Control, StepConfig
 from engine.cloth.fabrics import FABRICS, get_fabric
-from engine.cloth.model import (FLEXION, MASS_FLOOR, MASS_SCALE_PERCENTILE, SHEAR, STRUCTURAL, ClothParams, ClothState, build_model,
-                               lumped_mass, weld_model, with_stiffness)
+from engine.cloth.model import (FLEXION, MASS_FLOOR, MASS_SCALE_PERCENTILE, SHEAR, STRUCTURAL, ClothParams, ClothState,
+                                build_model, lumped_mass, weld_model, with_stiffness)
+from engine.cloth.schedule import CheckSchedule
 from engine.cloth.solver import GRAVITY, ClothSolver, FireRelaxer
 from engine.cloth.welds import merge_map, pull_seams
+from engine.collide.base import Collider
 from engine.errors import InputError
 from engine.garment.garment import build_garment
 from engine.pattern.spec import PatternSpec
+from engine.scene.tuning import Tuning
 
 H = 0.02
 SIDE = 0.20  # m
@@ -216,17 +225,23 @@ def test_solver_refuses_dt_above_the_bound(model):
             ClothSolver(model, dt=bad, force_dt=True)
 
 
-def test_solver_refuses_unknown_velocity_mode(garment):
-    m = _model(garment, params=replace(ClothParams(), velocity_mode="sideways"))
+def test_solver_refuses_unknown_velocity_mode():
     with pytest.raises(InputError) as ei:
-        ClothSolver(m)
+        StepConfig(velocity_mode="sideways")
     assert "sideways" in str(ei.value) and "average" in str(ei.value) and "zero" in str(ei.value)
+
+
+@pytest.mark.parametrize("field, bad", [("vm_passes", 0), ("contact_rounds", 1.5), ("flexion_every", 17),
+                                        ("strain_guard", -0.1), ("push_time", 0.0), ("precision", "half")])
+def test_step_config_refuses_absurd_values(field, bad):
+    with pytest.raises(InputError, match=field):
+        StepConfig(**{field: bad})
 
 
 @pytest.mark.parametrize("mode", ["average", "zero"])
 def test_free_fall(garment, mode):
-    m = _model(garment, params=replace(ClothParams(), velocity_mode=mode))
-    solver = ClothSolver(m, collider=None)
+    m = _model(garment)
+    solver = ClothSolver(m, collider=None, config=StepConfig(velocity_mode=mode))
     state = ClothState(garment.positions.copy(), np.zeros_like(garment.positions))
     com0 = (m.mass[:, None] * state.x).sum(0) / m.mass.sum()
     steps = int(round(0.1 / solver.dt))
@@ -332,12 +347,12 @@ def test_fire_mix_turns_velocity_toward_the_force_or_stops():
     x = np.array([[0.0, 1.0, 0.0], [0.5, 1.0, 0.2]])
     want = 0.9 * v + 0.1 * np.linalg.norm(v) * f / np.linalg.norm(f)
     x1 = x.copy()
-    p = K.fire_mix(f, v, x1, 0.01, 0.1)
+    p = KI.fire_mix(f, v, x1, 0.01, 0.1)
     assert p == pytest.approx(0.5)
     np.testing.assert_allclose(v, want, atol=1e-12)
     np.testing.assert_array_equal(x1, x)
     v2, x2 = -v, x.copy()
-    assert K.fire_mix(f, v2, x2, 0.01, 0.1) < 0
+    assert KI.fire_mix(f, v2, x2, 0.01, 0.1) < 0
     np.testing.assert_allclose(x2, x + 0.005 * v, atol=1e-15)  # back along -v2, half a step
     assert np.all(v2 == 0.0)
 
@@ -351,7 +366,7 @@ def test_the_guard_takes_away_the_velocity_that_would_stretch_its_springs_again(
     x[0] += [0.001, 0.0, 0.0]  # moved +x
     x[1] += [0.0, 0.002, 0.0]  # moved +y
     v = np.array([[-0.5, 0.3, 0.0], [0.2, 0.4, -0.1], [-1.0, -1.0, 0.0]])
-    assert K.inelastic_guard(x, x0, v) == 1
+    assert KS.inelastic_guard(x, x0, v) == 1
     np.testing.assert_allclose(v[0], [0.0, 0.3, 0.0], atol=1e-12)  # the part against the move is gone
     np.testing.assert_allclose(v[1], [0.2, 0.4, -0.1])  # moving with its move: kept
     np.testing.assert_allclose(v[2], [-1.0, -1.0, 0.0])  # not moved: kept
@@ -378,12 +393,12 @@ def _vm(x, v, mode, threshold=0.1, recover=1e12, active=True, body_v=None):
     rest = np.array([1.0])
     work = np.zeros(1, dtype=np.int32)
     body_v = np.zeros((2, 3)) if body_v is None else np.asarray(body_v, np.float64)
-    return K.modify_velocities(x, v, springs, rest, np.array([active]), threshold, K.VM_MODES[mode],
+    return KS.modify_velocities(x, v, springs, rest, np.array([active]), threshold, KS.VM_MODES[mode],
                                np.array([0.0, -9.81, 0.0]), 1e-4, body_v, 4, work, np.zeros((1, 4)),
                                np.zeros((1, 2), np.int32), recover)
 
 
-@pytest.mark.parametrize("recover", [1e12, ClothParams().recover])
+@pytest.mark.parametrize("recover", [1e12, StepConfig().recover])
 def test_average_mode(recover):
     x, v = _two_points()
     v0 = v.copy()
@@ -397,7 +412,7 @@ def test_average_mode(recover):
     np.testing.assert_allclose(v[:, 1:], v0[:, 1:])  # across the spring: untouched
 
 
-@pytest.mark.parametrize("recover", [1e12, ClothParams().recover])
+@pytest.mark.parametrize("recover", [1e12, StepConfig().recover])
 def test_zero_mode(recover):
     x, v = _two_points()
     v0 = v.copy()
@@ -530,19 +545,19 @@ def test_stale_contacts_carry_the_last_answer_forward():
     none = np.zeros(0, np.int64)
     # point 0 moved 3 mm out along its normal (leaves the band), point 2 moved 1 mm deeper
     pts = q_pts + np.array([[0, 0, 0.003], [0.0005, 0, 0], [-0.001, 0, 0]])
-    assert K.stale_contacts(pts, q_pts, q_pts, q_st, q_n, q_d, st, d, 0.004, 0.0005, none, False) == 0
+    assert KR.stale_contacts(pts, q_pts, q_pts, q_st, q_n, q_d, st, d, 0.004, 0.0005, none, False) == 0
     assert st.tolist() == [0, 0, 2]
     assert d[0] == pytest.approx(-0.001) and d[2] == pytest.approx(0.005)
     # stale: a point moved more than `reach`, or the clear one moved past its distance + slack
-    assert K.stale_contacts(pts, q_pts, q_pts, q_st, q_n, q_d, st, d, 0.002, 0.0005, none, False) == -1
+    assert KR.stale_contacts(pts, q_pts, q_pts, q_st, q_n, q_d, st, d, 0.002, 0.0005, none, False) == -1
     pts[1] = [0.0, 0.0, -0.011]
-    assert K.stale_contacts(pts, q_pts, q_pts, q_st, q_n, q_d, st, d, 0.1, 0.0005, none, False) == -1
+    assert KR.stale_contacts(pts, q_pts, q_pts, q_st, q_n, q_d, st, d, 0.1, 0.0005, none, False) == -1
     # ... unless the collider can answer that point alone: then it is listed, the rest carries
     rows = np.zeros(3, np.int64)
-    assert K.stale_contacts(pts, q_pts, q_pts, q_st, q_n, q_d, st, d, 0.1, 0.0005, rows, False) == 1
+    assert KR.stale_contacts(pts, q_pts, q_pts, q_st, q_n, q_d, st, d, 0.1, 0.0005, rows, False) == 1
     assert rows[0] == 1
     pts[1] = [0.0, 0.0, -0.0104]
-    assert K.stale_contacts(pts, q_pts, q_pts, q_st, q_n, q_d, st, d, 0.1, 0.0005, none, False) == 0
+    assert KR.stale_contacts(pts, q_pts, q_pts, q_st, q_n, q_d, st, d, 0.1, 0.0005, none, False) == 0
 
 
 def test_carried_map_depth_follows_the_slope():
@@ -555,9 +570,9 @@ def test_carried_map_depth_follows_the_slope():
     q_st, q_d = np.array([1, 1], np.int8), np.array([0.004, 0.004])
     st, d = np.zeros(2, np.int8), np.zeros(2)
     none = np.zeros(0, np.int64)
-    K.stale_contacts(pts, q_pts, q_pts, q_st, n, q_d, st, d, 0.01, 0.0005, none, True)
+    KR.stale_contacts(pts, q_pts, q_pts, q_st, n, q_d, st, d, 0.01, 0.0005, none, True)
     assert d.tolist() == pytest.approx([0.002, 0.003])
-    K.stale_contacts(pts, q_pts, q_pts, q_st, n, q_d, st, d, 0.01, 0.0005, none, False)
+    KR.stale_contacts(pts, q_pts, q_pts, q_st, n, q_d, st, d, 0.01, 0.0005, none, False)
     assert d.tolist() == pytest.approx([0.003, 0.003])
 
 
@@ -569,17 +584,17 @@ def test_rows_to_ask_and_keep_rows():
     q_d = np.array([0.001, -0.01, -0.0005, -np.inf])  # contact; 10 mm, 0.5 mm clear; no map
     pts = q_pts + np.array([[0, 0, 0.0001], [0.0002, 0, 0], [0.0006, 0, 0], [0.0003, 0, 0]])
     rows = np.zeros(4, np.int64)
-    k = K.rows_to_ask(pts, q_pts, q_st, q_d, 0.001, 0.0, rows)
+    k = KR.rows_to_ask(pts, q_pts, q_st, q_d, 0.001, 0.0, rows)
     assert rows[:k].tolist() == [0, 2]
     pts[3] = [0.002, 0, 0]  # moved past `reach`: asked even with no map under it
-    k = K.rows_to_ask(pts, q_pts, q_st, q_d, 0.001, 0.0, rows)
+    k = KR.rows_to_ask(pts, q_pts, q_st, q_d, 0.001, 0.0, rows)
     assert rows[:k].tolist() == [0, 2, 3]
     status = np.array([2, 9, 1, 0], np.int8)
     normal = np.arange(12.0).reshape(4, 3)
     depth = np.array([0.006, 9.0, 0.001, -0.02])
     q_n, q_bv = np.zeros((4, 3)), np.zeros((4, 3))
     c_st, c_d = np.zeros(4, np.int8), np.zeros(4)
-    K.keep_rows(rows, k, pts, status, normal, normal + 1, depth, q_pts, q_st, q_n, q_bv, q_d, c_st, c_d)
+    KR.keep_rows(rows, k, pts, status, normal, normal + 1, depth, q_pts, q_st, q_n, q_bv, q_d, c_st, c_d)
     assert q_st.tolist() == c_st.tolist() == [2, 0, 1, 0]
     assert q_d.tolist() == [0.006, -0.01, 0.001, -0.02]
     assert c_d.tolist() == [0.006, 0.0, 0.001, -0.02]  # row 1 was not asked: left as it was
@@ -588,7 +603,7 @@ def test_rows_to_ask_and_keep_rows():
     assert np.array_equal(q_bv[[0, 2, 3]], normal[[0, 2, 3]] + 1)
 
 
-class _CountingCollider:
+class _CountingCollider(Collider):
     """A flat floor at y = 0 (status/normal/depth like the maps), counting its queries."""
 
     def __init__(self):
@@ -605,11 +620,10 @@ class _CountingCollider:
 
 
 def test_solver_requeries_when_the_body_moves_or_points_travel(garment):
-    m = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
-                    get_fabric("cotton"), H, ClothParams(requery_every=8, requery_move=0.001, collide_every=1))
+    m = _model(garment)
     x = garment.positions.copy()
     x[:, 1] += 0.5 - x[:, 1].min()  # unstretched, at rest, far above the floor: answers are reused
-    s = ClothSolver(m, _CountingCollider(), gravity=np.zeros(3))
+    s = ClothSolver(m, _CountingCollider(), StepConfig(requery_every=8, requery_move=0.001), gravity=np.zeros(3))
     st = ClothState(x, np.zeros_like(x))
     for _ in range(16):
         s.step(st)
@@ -625,9 +639,7 @@ def test_solver_requeries_when_the_body_moves_or_points_travel(garment):
     assert int(travelled / 0.001) <= s.collider.calls - calls <= int(travelled / 0.001) + 1 < 8
     # a clear point heading for the floor is asked again before it gets 0.5 mm into the band,
     # even when `requery_move` alone would wait (1 cm here)
-    m2 = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
-                     get_fabric("cotton"), H, ClothParams(requery_every=8, requery_move=0.01, collide_every=1))
-    s2 = ClothSolver(m2, _CountingCollider(), gravity=np.zeros(3))
+    s2 = ClothSolver(m, _CountingCollider(), StepConfig(requery_every=8, requery_move=0.01), gravity=np.zeros(3))
     x2 = garment.positions.copy()
     x2[:, 1] += 0.0055 - x2[:, 1].min()  # 0.5 mm above the band
     st = ClothState(x2, np.zeros_like(x2))
@@ -639,6 +651,8 @@ def test_solver_requeries_when_the_body_moves_or_points_travel(garment):
 
 class _RowsCollider(_CountingCollider):
     """The floor, able to answer some points alone (as MapCollider.query_rows); counts them."""
+
+    answers_rows = True
 
     def __init__(self):
         super().__init__()
@@ -662,12 +676,12 @@ def test_solver_asks_a_rows_collider_only_for_points_that_may_have_changed(garme
     """A sheet hanging clear of the floor is asked once, however many steps pass; a sheet lying
     in the floor's band is asked again only for its contacts (every `requery_every` steps), and
     the carried answers are those a fresh query gives."""
-    m = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
-                    get_fabric("cotton"), H, ClothParams(requery_every=8, requery_move=0.001, collide_every=1))
+    m = _model(garment)
+    cfg = StepConfig(requery_every=8, requery_move=0.001)
     n_pts = m.n + len(m.quads) + len(m.tris)
     x = garment.positions.copy()
     x[:, 1] += 0.5 - x[:, 1].min()
-    s = ClothSolver(m, _RowsCollider(), gravity=np.zeros(3))
+    s = ClothSolver(m, _RowsCollider(), cfg, gravity=np.zeros(3))
     st = ClothState(x, np.zeros_like(x))
     for _ in range(40):
         s.step(st)
@@ -677,10 +691,10 @@ def test_solver_asks_a_rows_collider_only_for_points_that_may_have_changed(garme
     p = garment.positions  # the square lies in the xy plane: lay it on the floor (xz), tilted
     a = np.arcsin(0.01)
     x2 = np.stack([p[:, 0] * np.cos(a), 0.004 + p[:, 0] * np.sin(a), p[:, 1]], axis=1)
-    s2 = ClothSolver(m, _RowsCollider(), gravity=np.zeros(3))
+    s2 = ClothSolver(m, _RowsCollider(), cfg, gravity=np.zeros(3))
     st2 = ClothState(x2, np.zeros_like(x2))
     s2.step(st2)
-    n_contact = int(np.count_nonzero(s2._q[2]))  # the statuses of the first query
+    n_contact = int(np.count_nonzero(s2.answers._q[2]))  # the statuses of the first query
     assert 0.3 * n_pts < n_contact < 0.7 * n_pts
     for _ in range(16):
         s2.step(st2)
@@ -689,8 +703,8 @@ def test_solver_asks_a_rows_collider_only_for_points_that_may_have_changed(garme
     # with 2 contact rounds a step, fewer with 4)
     extra = s2.collider.asked - (n_pts + 2 * n_contact)
     assert 0 <= extra < 0.15 * n_pts
-    fresh = _CountingCollider().query(s2.points)
-    carried = s2._contacts()
+    fresh = _CountingCollider().query(s2.buf.points)
+    carried = s2.answers.answer(s2.buf.points)
     assert np.array_equal(carried[0], fresh[0])
     assert np.allclose(carried[3], fresh[3], atol=1e-9)
 
@@ -701,16 +715,15 @@ def test_collisions_every_few_steps_still_stop_a_falling_sheet(garment):
     in the tolerance band, as with a check every step; a bad setting is refused."""
     lowest = {}
     for every in (1, 4, 3.5):
-        m = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
-                        get_fabric("cotton"), H, ClothParams(collide_every=every, requery_every=1))
-        s = ClothSolver(m, _CountingCollider())
+        s = ClothSolver(_model(garment), _CountingCollider(), StepConfig(requery_every=1))
+        control = Control(collide_every=every)
         x = garment.positions.copy()
         x[:, 1] += 0.02 - x[:, 1].min()
         st = ClothState(x, np.zeros_like(x))
         st.v[:] = [0.0, -2.0, 0.0]
         low = np.inf
         for _ in range(400):
-            s.step(st)
+            s.step(st, control)
             low = min(low, float(st.x[:, 1].min()))
         assert s.collider.calls == math.ceil(400 / every)  # (3.5: at steps 0, 4, 7, 11, 14, ...)
         lowest[every] = low
@@ -724,39 +737,32 @@ def test_checks_next_says_which_steps_ask_the_collider(garment, every):
     (a walk puts its moving body at the step's time only then), whole or fractional spacing."""
     col = _CountingCollider()
     m = _model(garment)
-    s = ClothSolver(replace(m, params=replace(m.params, collide_every=every, requery_every=1)), col)
+    s = ClothSolver(m, col, StepConfig(requery_every=1))
+    control = Control(collide_every=every)
     state = ClothState(garment.positions.copy() + (0.0, 0.3, 0.0), np.zeros_like(garment.positions))
     said, asked = [], []
     for _ in range(40):
-        said.append(s.checks_next())
+        said.append(s.checks_next(control))
         before = col.calls
-        s.step(state)
+        s.step(state, control)
         asked.append(col.calls > before)
     assert said == asked
     assert 40 / every - 1 <= sum(asked) <= 40 / every + 1
-    assert not ClothSolver(m).checks_next()  # no collider: never
+    assert not ClothSolver(m).checks_next(control)  # no collider: never
 
 
 def test_a_fractional_collide_every_checks_that_often_on_average(garment):
     """collide_every 2.5: checks at steps 0, 3, 5, 8, 10, ... (start + ceil(k x 2.5)), each
     predicting the points up to the next one; changing it starts a new schedule; a whole number
     checks where it divides the step count, as ever."""
-    s = ClothSolver(_model(garment))
-    got = []
-    for i in range(11):
-        s.iterations = i
-        got.append(s._check_now(2.5))
-    assert got == [3, 0, 0, 2, 0, 3, 0, 0, 2, 0, 3]
-    s.iterations = 12
-    assert s._check_now(1.5) == 2  # a new schedule from here: 12, 14, 15, 17
-    s.iterations = 13
-    assert s._check_now(1.5) == 0
-    s.iterations = 14
-    assert s._check_now(1.5) == 1
-    assert [s._check_now(4) if not setattr(s, "iterations", i) else None for i in (16, 17, 20)] == [4, 0, 4]
+    s = CheckSchedule()
+    assert [s.now(2.5, i) for i in range(11)] == [3, 0, 0, 2, 0, 3, 0, 0, 2, 0, 3]
+    assert s.now(1.5, 12) == 2  # a new schedule from here: 12, 14, 15, 17
+    assert s.now(1.5, 13) == 0
+    assert s.now(1.5, 14) == 1
+    assert [s.now(4, i) for i in (16, 17, 20)] == [4, 0, 4]
     with pytest.raises(InputError, match="collide_every"):
-        build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
-                    get_fabric("cotton"), H, ClothParams(collide_every=0))
+        Tuning(collide_every=0).validate()
 
 
 def test_weld_keeps_the_longer_rest_of_an_eased_seam():
@@ -912,18 +918,12 @@ def test_spring_runs_hold_every_spring_once():
 
 
 def _force_pass(solver, x, v, damping, mu, dt, slow_due):
-    m, r = solver.model, solver.runs
-    return K.eval_forces_and_integrate(x, v, m.inv_mass, m.mass, r.springs, r.perm, r.runs, r.n_run,
-                                       solver._sprops, GRAVITY, damping, solver.contact, solver.contact_n, mu,
-                                       dt, solver.f, solver.vm_work, solver.vm_geo, solver._fsoa, solver._run_tmp,
-                                       solver._lengths, solver._listed, solver._listed_words,
-                                       solver._geo_s, r.r_fast, r.n_fast, r.n_run_slow, slow_due, solver._f_slow,
-                                       solver._one, solver._tiny, r.r_held, m.springs, solver.vm_ends,
-                                       solver._near, solver._near_frac())[0]
+    return passes.eval_forces(solver.model, ClothState(x, v), solver.buf, passes.Forcing(GRAVITY, damping, mu), dt,
+                              slow_due, 1e30)[0]
 
 
-# (relative error of the forces: double; single precision, ClothSolver.single_precision_forces --
-# measured 2026-12-04 on this test's dress: 1.0e-5 of the largest force)
+# (relative error of the forces: double; single precision, StepConfig.precision: 1.0e-5 of the
+# largest force on this test's dress)
 @pytest.mark.parametrize("single, held, tol", [(False, False, 1e-9), (True, False, 3e-5), (False, True, 1e-9),
                                                (True, True, 3e-5)])
 def test_force_pass_matches_a_direct_sum(single, held, tol):
@@ -932,21 +932,19 @@ def test_force_pass_matches_a_direct_sum(single, held, tol):
     velocities after the step, and the listed over-long springs (in the model's order) against
     the same sums written with numpy one spring at a time -- in double precision, and in single
     (the walk's) to what single precision allows; with the shear springs held as the flexion
-    springs are (ClothSolver.hold_shear, the walk's) and without."""
+    springs are (StepConfig.hold_shear, the walk's) and without."""
     g, m = _catalogue_dress_model()
     rng = np.random.default_rng(3)
     x = g.positions + rng.normal(0, 0.002, g.positions.shape)
     v = rng.normal(0, 0.1, x.shape)
-    solver = ClothSolver(m)
+    solver = ClothSolver(m, config=StepConfig(precision="single" if single else "double", hold_shear=held))
     if single:
-        solver.single_precision_forces()
-        assert solver._fsoa.dtype == solver._sprops.dtype == np.float32 and solver._soa.dtype == np.float64
+        assert solver.buf.fsoa.dtype == solver.buf.sprops.dtype == np.float32 and solver.buf.soa.dtype == np.float64
     if held:
-        solver.hold_shear()
-        assert solver.runs.r_held < solver.runs.r_fast
-    solver.contact[:] = rng.random(m.n) < 0.3
+        assert solver.buf.runs.r_held < solver.buf.runs.r_fast
+    solver.buf.contact[:] = rng.random(m.n) < 0.3
     n = rng.normal(size=(m.n, 3))
-    solver.contact_n[:] = n / np.linalg.norm(n, axis=1, keepdims=True)
+    solver.buf.contact_n[:] = n / np.linalg.norm(n, axis=1, keepdims=True)
     dt, damping, mu = 1e-4, 0.02, 0.4
     v_after = v.copy()
     n_over = _force_pass(solver, x, v_after, damping, mu, dt, True)
@@ -958,9 +956,9 @@ def test_force_pass_matches_a_direct_sum(single, held, tol):
     f = m.mass[:, None] * GRAVITY - damping * m.mass[:, None] * v
     np.add.at(f, a, c[:, None] * d)
     np.add.at(f, b, -c[:, None] * d)
-    fn = np.einsum("ij,ij->i", f, solver.contact_n)
-    push = solver.contact & (fn < 0)
-    ft = f - fn[:, None] * solver.contact_n
+    fn = np.einsum("ij,ij->i", f, solver.buf.contact_n)
+    push = solver.buf.contact & (fn < 0)
+    ft = f - fn[:, None] * solver.buf.contact_n
     scale = np.maximum(0.0, 1.0 - mu * -fn / np.linalg.norm(ft, axis=1))
     f = np.where(push[:, None], ft * scale[:, None], f)
     assert 0.1 < push.mean() < 0.2  # the reaction force was exercised
@@ -970,25 +968,25 @@ def test_force_pass_matches_a_direct_sum(single, held, tol):
     limit = (1 + m.fabric.strain_threshold) * m.rest
     over = np.flatnonzero((m.kind != FLEXION) & (length > limit))
     assert len(over) > 10
-    listed = solver.vm_work[:n_over]
+    listed = solver.buf.work[:n_over]
     if single:  # (a spring within single precision of its limit may go either way)
         near = np.abs(length - limit) <= 1e-6 * limit
         assert np.array_equal(np.setxor1d(listed, over), np.setxor1d(listed, over)[near[np.setxor1d(listed, over)]])
         assert np.all(np.diff(listed) > 0)  # in the model's order
         over = listed
     assert np.array_equal(listed, over)  # in the model's order (the velocity modification's)
-    assert not solver._listed.any()
-    geo = solver.vm_geo[:n_over]
+    assert not solver.buf.listed.any()
+    geo = solver.buf.geo[:n_over]
     assert np.allclose(geo[:, :3], d[listed] / length[listed, None], atol=10 * tol)
     assert np.allclose(geo[:, 3], length[listed] - limit[listed], atol=tol * m.rest.max())
     # a step where the flexion springs are not due: their forces are the ones evaluated above
     # (at x), the others' at the new positions
     x2 = x + rng.normal(0, 0.002, x.shape)
-    solver.contact[:] = False
+    solver.buf.contact[:] = False
     v2 = v.copy()
     n_over2 = _force_pass(solver, x2, v2, damping, mu, dt, False)
     flex = m.kind == FLEXION
-    r = solver.runs
+    r = solver.buf.runs
     for first, _, _, length in r.runs[r.r_held:r.r_fast]:  # the held runs' springs (those outside runs are not held)
         flex[r.perm[first:first + length]] = True
     shear_held = np.count_nonzero(flex & (m.kind == SHEAR))
@@ -1012,11 +1010,11 @@ def test_force_pass_matches_a_direct_sum(single, held, tol):
     # every limited spring is listed where it is now, held or not (the held ones by their lengths alone)
     over2 = np.flatnonzero((m.kind != FLEXION) & (l2 > limit))
     assert (m.kind[over2] == SHEAR).sum() > 10
-    listed2 = solver.vm_work[:n_over2]
+    listed2 = solver.buf.work[:n_over2]
     odd = np.setxor1d(listed2, over2)
     assert np.all(np.abs(l2[odd] - limit[odd]) <= (1e-6 if single else 1e-12) * limit[odd])
     assert np.all(np.diff(listed2) > 0)
-    geo2 = solver.vm_geo[:n_over2]
+    geo2 = solver.buf.geo[:n_over2]
     assert np.allclose(geo2[:, :3], d2[listed2] / l2[listed2, None], atol=10 * tol)
     assert np.allclose(geo2[:, 3], l2[listed2] - limit[listed2], atol=tol * m.rest.max())
 
@@ -1028,7 +1026,7 @@ def test_strain_guard_never_pulls_a_contact_into_the_body():
         x = np.array([[0.0, 0.0, 0.0], [0.1, -0.1, 0.0]])
         contact = np.array([True, False])
         normal = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 0.0]])
-        n = K.provot_positions(x, np.array([[0, 1]], np.int32), np.array([0.1]), np.array([True]), 0.0,
+        n = KS.provot_positions(x, np.array([[0, 1]], np.int32), np.array([0.1]), np.array([True]), 0.0,
                                np.ones(2), 1, np.zeros(1, np.int32), keep_out, contact, normal)
         return n, x
     n, x = run(True)
@@ -1051,7 +1049,7 @@ def _stretched(garment, scale, noise):
 
 
 def test_guard_positions_is_the_plain_guard_bit_for_bit(garment):
-    """K.guard_positions (a vector pass over the force pass's runs, then only the flagged
+    """KS.guard_positions (a vector pass over the force pass's runs, then only the flagged
     springs and the springs next to what moved) gives exactly what provot_positions with
     keep_out followed by inelastic_guard gives: positions, velocities, the count and the list
     of long springs -- on a cloth stretched unevenly (many long springs next to each other, so
@@ -1062,83 +1060,81 @@ def test_guard_positions_is_the_plain_guard_bit_for_bit(garment):
     thr = m.fabric.strain_threshold + 0.02
     x1, v1, w1 = x0.copy(), v0.copy(), np.zeros(len(m.springs), np.int32)
     active = m.kind != FLEXION
-    n1 = K.provot_positions(x1, m.springs, m.rest, active, thr, m.inv_mass, 6, w1, True, contact, normal, 0.0003)
+    n1 = KS.provot_positions(x1, m.springs, m.rest, active, thr, m.inv_mass, 6, w1, True, contact, normal, 0.0003)
     assert n1 > 50
-    K.inelastic_guard(x1, x0, v1)
+    KS.inelastic_guard(x1, x0, v1)
     solver = ClothSolver(m)
     x2, v2, r = x0.copy(), v0.copy(), m.runs
-    n2 = K.guard_positions(x2, v2, m.springs, m.rest, active, thr, m.inv_mass, 6, solver.vm_work, contact, normal,
-                           0.0003, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run, solver._guard_limits(thr), solver._soa,
-                           solver._listed, solver._listed_words, m.adj_ptr, m.adj_spring, solver.x_guard,
-                           solver._saved, solver._saved_list)
+    n2 = KS.guard_positions(x2, v2, m.springs, m.rest, active, thr, m.inv_mass, 6, solver.buf.work, contact, normal,
+                           0.0003, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run, limits2(solver.model, thr)[solver.buf.runs.fast.perm], solver.buf.soa,
+                           solver.buf.listed, solver.buf.listed_words, m.adj_ptr, m.adj_spring, solver.buf.x_guard,
+                           solver.buf.saved, solver.buf.saved_list)
     assert n2 == n1
-    np.testing.assert_array_equal(solver.vm_work[:n2], w1[:n1])
+    np.testing.assert_array_equal(solver.buf.work[:n2], w1[:n1])
     np.testing.assert_array_equal(x2, x1)
     np.testing.assert_array_equal(v2, v1)
-    assert not solver._listed.any() and not solver._saved.any()
+    assert not solver.buf.listed.any() and not solver.buf.saved.any()
     # nothing long: nothing moves
     x3, v3 = garment.positions.copy(), v0.copy()
-    assert K.guard_positions(x3, v3, m.springs, m.rest, active, thr, m.inv_mass, 6, solver.vm_work, contact, normal,
-                             0.0003, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run, solver._guard_limits(thr), solver._soa,
-                             solver._listed, solver._listed_words, m.adj_ptr, m.adj_spring, solver.x_guard,
-                             solver._saved, solver._saved_list) == 0
+    assert KS.guard_positions(x3, v3, m.springs, m.rest, active, thr, m.inv_mass, 6, solver.buf.work, contact, normal,
+                             0.0003, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run, limits2(solver.model, thr)[solver.buf.runs.fast.perm], solver.buf.soa,
+                             solver.buf.listed, solver.buf.listed_words, m.adj_ptr, m.adj_spring, solver.buf.x_guard,
+                             solver.buf.saved, solver.buf.saved_list) == 0
     np.testing.assert_array_equal(x3, garment.positions)
     np.testing.assert_array_equal(v3, v0)
 
 
 def test_the_late_guard_finds_and_makes_what_guard_positions_does(garment):
-    """ClothSolver.late_guard: K.guard_listed, flagging from the force pass's list of long
+    """StepConfig.late_guard: KS.guard_listed, flagging from the force pass's list of long
     springs (single precision lengths, held shear springs: the walk's solver), gives exactly
-    what K.guard_positions gives on the same positions and velocities -- on a cloth stretched
+    what KS.guard_positions gives on the same positions and velocities -- on a cloth stretched
     unevenly, some points touching a body -- and then the listed springs whose ends moved are
     measured again (one no longer long is left alone: excess -1e30; so may be, in double, one
     whose end the guard looked at and did not move); the flag and point buffers are clear
     afterwards."""
     m = _model(garment)
     x0, v0, contact, normal = _stretched(garment, [1.05, 1.0, 1.0], 0.0005)
-    solver = ClothSolver(replace(m, params=replace(m.params, strain_guard=0.02)))
-    solver.single_precision_forces()
-    solver.hold_shear()
-    solver.late_guard()
-    solver.contact[:], solver.contact_n[:] = contact, normal
+    solver = ClothSolver(m, config=StepConfig(strain_guard=0.02, precision="single", hold_shear=True,
+                                              late_guard=True))
+    solver.buf.contact[:], solver.buf.contact_n[:] = contact, normal
     state = ClothState(x0.copy(), v0.copy())
-    n_over = solver._forces(state, GRAVITY, 1.0, 1.0)
+    n_over = solver._forces(state, passes.Forcing(GRAVITY, m.params.damping, m.fabric.friction), True)
     assert n_over > 50
-    listed, geo_before = solver.vm_work[:n_over].copy(), solver.vm_geo[:n_over].copy()
+    listed, geo_before = solver.buf.work[:n_over].copy(), solver.buf.geo[:n_over].copy()
     thr = m.fabric.strain_threshold + 0.02
     # the list comes with its springs' ends, and with those near the guard's length: every one
     # past it among them
-    np.testing.assert_array_equal(solver.vm_ends[:n_over], m.springs[listed])
-    near = solver._near[:solver._n_near]
+    np.testing.assert_array_equal(solver.buf.ends[:n_over], m.springs[listed])
+    near = solver.buf.near[:solver._n_near]
     assert 0 < len(near) < n_over and np.all(np.diff(near) > 0)
     ln = np.linalg.norm(x0[m.springs[listed, 1]] - x0[m.springs[listed, 0]], axis=1)
     assert set(np.flatnonzero(ln > (1.0 + thr) * m.rest[listed])) <= set(near)
     assert np.all(ln[near] > (1.0 + m.fabric.strain_threshold + 0.0099) * m.rest[listed[near]])
     x1, v1, w1 = state.x.copy(), state.v.copy(), np.zeros(len(m.springs), np.int32)
     plain = ClothSolver(m)
-    r = plain.runs
+    r, pb = plain.buf.runs, plain.buf
     active = m.kind != FLEXION
-    n1 = K.guard_positions(x1, v1, m.springs, m.rest, active, thr, m.inv_mass, 6, w1, contact, normal,
-                           0.0003, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run, plain._guard_limits(thr), plain._soa,
-                           plain._listed, plain._listed_words, m.adj_ptr, m.adj_spring, plain.x_guard,
-                           plain._saved, plain._saved_list)
+    n1 = KS.guard_positions(x1, v1, m.springs, m.rest, active, thr, m.inv_mass, 6, w1, contact, normal,
+                           0.0003, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run, limits2(m, thr)[r.fast.perm],
+                           pb.soa, pb.listed, pb.listed_words, m.adj_ptr, m.adj_spring, pb.x_guard, pb.saved,
+                           pb.saved_list)
     assert n1 > 10
-    n2 = K.guard_listed(state.x, state.v, m.springs, m.rest, active, thr, m.inv_mass, 6, solver._guard_work,
-                        contact, normal, 0.0003, solver._listed, solver._listed_words, m.adj_ptr, m.adj_spring,
-                        solver.x_guard, solver._saved, solver._saved_list, solver.vm_work, solver.vm_geo,
-                        solver.vm_ends, n_over, solver._near, solver._n_near, solver._late_limits(thr),
+    n2 = KS.guard_listed(state.x, state.v, m.springs, m.rest, active, thr, m.inv_mass, 6, solver.buf.guard_work,
+                        contact, normal, 0.0003, solver.buf.listed, solver.buf.listed_words, m.adj_ptr, m.adj_spring,
+                        solver.buf.x_guard, solver.buf.saved, solver.buf.saved_list, solver.buf.work, solver.buf.geo,
+                        solver.buf.ends, n_over, solver.buf.near, solver._n_near, limits2(solver.model, thr),
                         m.fabric.strain_threshold)
     assert n2 == n1
-    np.testing.assert_array_equal(solver._guard_work[:n2], w1[:n1])
+    np.testing.assert_array_equal(solver.buf.guard_work[:n2], w1[:n1])
     np.testing.assert_array_equal(state.x, x1)
     np.testing.assert_array_equal(state.v, v1)
-    assert not solver._listed.any() and not solver._saved.any()
+    assert not solver.buf.listed.any() and not solver.buf.saved.any()
     # the list itself is kept; its geometry is new where an end moved
-    np.testing.assert_array_equal(solver.vm_work[:n_over], listed)
+    np.testing.assert_array_equal(solver.buf.work[:n_over], listed)
     a, b = m.springs[listed, 0], m.springs[listed, 1]
     moved = np.any(x1[a] != x0[a], axis=1) | np.any(x1[b] != x0[b], axis=1)
     assert 10 < moved.sum() < n_over - 10
-    geo = solver.vm_geo[:n_over]
+    geo = solver.buf.geo[:n_over]
     d = x1[b] - x1[a]
     length = np.linalg.norm(d, axis=1)
     excess = length - (1.0 + m.fabric.strain_threshold) * m.rest[listed]
@@ -1153,8 +1149,8 @@ def test_the_late_guard_finds_and_makes_what_guard_positions_does(garment):
     vv = state.v.copy()
     k = int(np.flatnonzero(moved & (excess <= 0))[0])
     s = listed[k]
-    assert K.modify_velocities(state.x, vv, m.springs[s:s + 1], m.rest[s:s + 1], active[s:s + 1],
-                               m.fabric.strain_threshold, K.VM_AVERAGE, GRAVITY, solver.dt, solver.body_v, 3,
+    assert KS.modify_velocities(state.x, vv, m.springs[s:s + 1], m.rest[s:s + 1], active[s:s + 1],
+                               m.fabric.strain_threshold, KS.VM_AVERAGE, GRAVITY, solver.dt, solver.buf.body_v, 3,
                                np.zeros(1, np.int32), geo[k:k + 1].copy(), m.springs[s:s + 1].copy(), 0.002, 1) == 1
     np.testing.assert_array_equal(vv, state.v)
 
@@ -1165,8 +1161,7 @@ def test_a_late_guarded_step_guards_what_it_integrated(garment):
     m = _model(garment)
     rng = np.random.default_rng(3)
     x0 = garment.positions * np.array([1.09, 1.0, 1.02]) + rng.normal(0.0, 0.0008, garment.positions.shape)
-    solver = ClothSolver(replace(m, params=replace(m.params, strain_guard=0.02)))
-    solver.late_guard()
+    solver = ClothSolver(m, config=StepConfig(strain_guard=0.02, late_guard=True))
     state = ClothState(x0.copy(), np.zeros_like(x0))
     solver.step(state)
     assert solver.guard_pending
@@ -1184,15 +1179,13 @@ def test_a_late_guarded_step_guards_what_it_integrated(garment):
 
 
 def test_dropped_forces_change_nothing_else(garment):
-    """ClothSolver.drop_forces (the walk's): the force pass no longer writes solver.f; the
+    """StepConfig.keep_forces False (the walk's): the force pass no longer writes solver.f; the
     steps' positions and velocities are the same bit for bit."""
     m = _model(garment)
     x0, v0, _, _ = _stretched(garment, [1.05, 1.0, 1.0], 0.0005)
     out = []
     for drop in (False, True):
-        solver = ClothSolver(m)
-        if drop:
-            solver.drop_forces()
+        solver = ClothSolver(m, config=StepConfig(keep_forces=not drop))
         state = ClothState(x0.copy(), v0.copy())
         for _ in range(5):
             solver.step(state)
@@ -1210,7 +1203,7 @@ def test_strain_guard_shortens_a_spring_a_little_at_a_time():
         x = np.array([[0.0, 0.0, 0.0], [0.103, 0.0, 0.0]])
         args = (np.array([[0, 1]], np.int32), np.array([0.1]), np.array([True]), 0.0, np.ones(2), passes,
                 np.zeros(1, np.int32), True, np.zeros(2, np.bool_), np.zeros((2, 3)))
-        K.provot_positions(x, *args, max_move) if max_move is not None else K.provot_positions(x, *args)
+        KS.provot_positions(x, *args, max_move) if max_move is not None else KS.provot_positions(x, *args)
         return x[1, 0] - x[0, 0]
     assert run(0.0003, 1) == pytest.approx(0.1027)
     assert run(0.0003, 4) == pytest.approx(0.1018)
@@ -1220,7 +1213,7 @@ def test_strain_guard_shortens_a_spring_a_little_at_a_time():
 @pytest.mark.parametrize("mode", ["average", "directional"])
 @pytest.mark.parametrize("rounds", [1, 2, 4])
 def test_contact_rounds_match_the_kernels_in_turn(mode, rounds):
-    """K.contact_rounds (the solver's fused call) gives what modify_velocities, point_average and
+    """KC.contact_rounds (the solver's fused call) gives what modify_velocities, point_average and
     collision_response give called one after the other, round by round."""
     rng = np.random.default_rng(7)
     n, nq, nt, s = 300, 80, 20, 1200
@@ -1238,7 +1231,7 @@ def test_contact_rounds_match_the_kernels_in_turn(mode, rounds):
     bvel = rng.normal(size=(m, 3)) * 0.1
     depth = rng.uniform(0.0, 0.01, m)
     g = np.array([0.0, -9.81, 0.0])
-    mode_i = K.VM_MODES[mode]
+    mode_i = KS.VM_MODES[mode]
     body_prev = rng.normal(size=(n, 3)) * 0.1  # the body velocities of the previous step
     out = []
     for fused in (False, True):
@@ -1246,22 +1239,22 @@ def test_contact_rounds_match_the_kernels_in_turn(mode, rounds):
         work, geo, ends = np.zeros(s, np.int32), np.zeros((s, 4)), np.zeros((s, 2), np.int32)
         body_v = body_prev.copy()
         contact, contact_n = np.zeros(n, np.bool_), np.zeros((n, 3))
-        n_act = K.modify_velocities(x, v, springs, rest, active, 0.05, mode_i, g, 1e-4, body_v, 6, work, geo,
+        n_act = KS.modify_velocities(x, v, springs, rest, active, 0.05, mode_i, g, 1e-4, body_v, 6, work, geo,
                                     ends, 0.002)
         assert n_act > 0
         pv = np.zeros((m, 3))
-        K.point_average(v, quads, tris, pv)
+        KC.point_average(v, quads, tris, pv)
         if fused:
-            hits = K.contact_rounds(v, ends, mode_i, g, 1e-4, 6, work, geo, 0.002, n_act,
+            hits = KC.contact_rounds(v, ends, mode_i, g, 1e-4, 6, work, geo, 0.002, n_act,
                                     rounds, status, normal, bvel, depth, n, quads, tris, 0.005, 0.0, 0.4,
                                     contact, contact_n, body_v, np.zeros(m, np.int32), np.zeros(n, np.int32), 50.0)
         else:
             for r in range(rounds):
                 if r > 0:
-                    K.modify_velocities(x, v, springs, rest, active, 0.05, mode_i, g, 1e-4, body_v, 6, work,
+                    KS.modify_velocities(x, v, springs, rest, active, 0.05, mode_i, g, 1e-4, body_v, 6, work,
                                         geo, ends, 0.002, n_act)
-                    K.point_average(v, quads, tris, pv)
-                hits = K.collision_response(v, status, normal, bvel, depth, pv, n, quads, tris, 0.005, 0.0, 0.4,
+                    KC.point_average(v, quads, tris, pv)
+                hits = KC.collision_response(v, status, normal, bvel, depth, pv, n, quads, tris, 0.005, 0.0, 0.4,
                                             1e-4, contact, contact_n, body_v, 50.0)
         out.append((hits, v, contact, contact_n[contact], body_v))
     assert out[0][0] == out[1][0] == int((status != 0).sum())
@@ -1278,12 +1271,15 @@ def test_drape_ends_soon_after_the_cloth_settles(garment, drape_min):
     window), not at the next whole window (0.75 s for drape_min 0.6, with 0.25 s windows)."""
     from dataclasses import replace as dc_replace
 
-    from engine.scene.drape import DrapeOptions, sew_and_drape
+    from engine.scene.drape import sew_and_drape
+    from engine.scene.request import TryOnOptions
+    from engine.scene.tuning import DrapeTuning
 
     flat = garment.positions.copy()
     flat[:, 0], flat[:, 1], flat[:, 2] = garment.uv[:, 0], 0.003, garment.uv[:, 1]  # in the floor's band
     g = dc_replace(garment, positions=flat)
-    res = sew_and_drape(g, _CountingCollider(), DrapeOptions(drape_min=drape_min, settle_time=0.25))
+    res = sew_and_drape(g, _CountingCollider(), TryOnOptions(),
+                        Tuning(drape=DrapeTuning(min_time=drape_min, settle_time=0.25)))
     t = res.iterations["draping"] * res.model.dt_bound
     assert res.settled
     assert max(drape_min, 0.5) <= t <= max(drape_min, 0.5) + 0.05 + 1e-3, t
@@ -1303,7 +1299,7 @@ def test_hold_contacts_stops_only_the_inward_motion_of_contacts():
                   [0.3, 0.0, -1.0]])  # not in contact: kept
     contact = np.array([True, True, True, False])
     out = v.copy()
-    K.hold_contacts(out, contact, n, body_v)
+    KC.hold_contacts(out, contact, n, body_v)
     np.testing.assert_allclose(out[0], [0.3, 0.0, 0.5])
     np.testing.assert_allclose(out[1], [0.3, 0.0, 0.5])
     np.testing.assert_allclose(out[2], v[2])
@@ -1315,9 +1311,9 @@ def test_hold_contacts_stops_only_the_inward_motion_of_contacts():
     cn /= np.linalg.norm(cn, axis=1)[:, None]
     bv, touch = rng.normal(size=(500, 3)) * 0.3, rng.random(500) < 0.4
     x1, v1, x2, v2 = x0.copy(), v0.copy(), x0.copy(), v0.copy()
-    K.hold_contacts(v1, touch, cn, bv)
-    K.integrate_positions(x1, v1, 3e-4)
-    K.hold_and_integrate(x2, v2, 3e-4, touch, cn, bv)
+    KC.hold_contacts(v1, touch, cn, bv)
+    KI.integrate_positions(x1, v1, 3e-4)
+    KI.hold_and_integrate(x2, v2, 3e-4, touch, cn, bv)
     assert not np.array_equal(v1, v0)
     np.testing.assert_array_equal(v2, v1)
     np.testing.assert_array_equal(x2, x1)
@@ -1337,14 +1333,14 @@ def test_drape_progress_follows_the_drift_down_to_rest():
 @pytest.mark.parametrize("push_time", [0.02, 0.005])
 def test_a_point_deep_in_the_band_moves_out_over_the_push_time(push_time):
     """A resting point in the inner half of the collision band gets an outward velocity of its
-    depth past the band's middle over ClothParams.push_time (the walk's is shorter than the
-    drape's: engine.scene.walk.WalkOptions.push_time), at most MAX_PUSH; one in the outer half
+    depth past the band's middle over StepConfig.push_time (the walk's is shorter than the
+    drape's: engine.scene.tuning.WalkTuning.step), at most MAX_PUSH; one in the outer half
     none."""
     tol = 0.005
-    for depth, want in ((0.004, (0.004 - 0.5 * tol) / push_time), (0.002, 0.0), (0.5, K.MAX_PUSH)):
+    for depth, want in ((0.004, (0.004 - 0.5 * tol) / push_time), (0.002, 0.0), (0.5, KC.MAX_PUSH)):
         v = np.zeros((1, 3))
         contact, contact_n, vb = np.zeros(1, np.bool_), np.zeros((1, 3)), np.zeros((1, 3))
-        hits = K.collision_response(v, np.array([1], np.int8), np.array([[0.0, 1.0, 0.0]]), np.zeros((1, 3)),
+        hits = KC.collision_response(v, np.array([1], np.int8), np.array([[0.0, 1.0, 0.0]]), np.zeros((1, 3)),
                                     np.array([depth]), v.copy(), 1, np.zeros((0, 4), np.int32),
                                     np.zeros((0, 3), np.int32), tol, 0.0, 0.4, 1e-4, contact, contact_n, vb, 1.0 / push_time)
         assert hits == 1 and contact[0]

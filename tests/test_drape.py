@@ -13,6 +13,8 @@ import pytest
 from typer.testing import CliRunner
 
 from engine.cli import app
+from engine.scene.request import TryOnOptions
+from engine.scene.tuning import DrapeTuning, SewTuning, Tuning
 from tests.samples import GC_SHIRT, SAMPLE_BODY, SAMPLE_SKIRT, write_arms_lowered_scan
 
 REPORT_KEYS = {"cloth_vertices", "iterations", "ms_per_iteration", "wall_seconds", "penetration_mm", "strain",
@@ -106,14 +108,13 @@ def test_a_dress_sews_at_other_cloth_resolutions(edge):
     (engine.garment.place._lean_in) and every resolution sews within 0.3 s (sewing only here:
     the drape is cut short)."""
     from engine.body import resolve_body
-    from engine.scene.drape import DrapeOptions
     from engine.scene.garments import resolve_garment
     from engine.scene.tryon import run_tryon
 
     b = resolve_body("default:female")
     spec, place, name = resolve_garment("dress", b, "M")
-    res, rep = run_tryon(b, spec, place=place, source=name, h=edge,
-                         options=DrapeOptions(drape_budget=0.01, drape_min=0.0))
+    res, rep = run_tryon(b, spec, TryOnOptions(resolution_cm=100 * edge),
+                         Tuning(drape=DrapeTuning(budget=0.01, min_time=0.0)), place=place, source=name)
     assert res.iterations["sewing"] * res.dt < 0.3, res.iterations
     assert rep["seam_gap_mm"]["snapped"] == 0 and rep["cloth_vertices"] < rep["cloth_vertices_unsewn"]
     assert rep["shift_mm"]["top"] > -60.0, rep["shift_mm"]  # on the shoulders (fallen: -400)
@@ -122,33 +123,32 @@ def test_a_dress_sews_at_other_cloth_resolutions(edge):
 def test_flat_panels_whose_seams_stop_closing_are_sewn_again_gently():
     """GarmentCode lays panels out flat round the body (the sample skirt's seams start 30 cm
     apart). If they do not close, sewing starts once more from the placement, pulled at
-    DrapeOptions.far_retry_vmax (GarmentCode's own T-shirt: its sleeves' seams stalled 9 cm
+    SewTuning.far_retry_vmax (GarmentCode's own T-shirt: its sleeves' seams stalled 9 cm
     open at 3 m/s and sewed at 1.5). Here the first pull is made far too slow to close within
     the budget: the second one sews; both attempts count; the progress says why it sews again.
     If both fail, the error says it was sewn twice."""
     from engine.body import resolve_body
     from engine.errors import SimulationError
-    from engine.scene.drape import DrapeOptions
     from engine.scene.garments import resolve_garment
     from engine.scene.tryon import run_tryon
 
     body = resolve_body(str(SAMPLE_BODY))
     spec, place, name = resolve_garment(str(SAMPLE_SKIRT), body, None)
     said = []
-    o = DrapeOptions(sew_vmax=0.05, far_retry_vmax=3.0, sew_budget=0.5, drape_budget=0.3)
-    res, rep = run_tryon(body, spec, h=0.04, place=place, source=name, options=o,
+    o = Tuning(sew=SewTuning(vmax=0.05, far_retry_vmax=3.0, budget=0.5), drape=DrapeTuning(budget=0.3))
+    res, rep = run_tryon(body, spec, TryOnOptions(resolution_cm=4.0), o, place=place, source=name,
                          progress=lambda stage, f, msg: said.append(msg))
     assert rep["seam_gap_mm"]["snapped"] == 0 and rep["cloth_vertices"] < rep["cloth_vertices_unsewn"]
     budget = int(np.ceil(0.5 / res.dt))
     assert rep["iterations_by_stage"]["sewing"] > budget  # the failed first attempt, then the second
     assert any("sewing again, pulled at 3 m/s" in m for m in said)
     with pytest.raises(SimulationError, match=r"sewn twice, pulled at 0.05 and 0.06 m/s"):
-        run_tryon(body, spec, h=0.04, place=place, source=name,
-                  options=DrapeOptions(sew_vmax=0.05, far_retry_vmax=0.06, sew_budget=0.3))
+        run_tryon(body, spec, TryOnOptions(resolution_cm=4.0),
+                  Tuning(sew=SewTuning(vmax=0.05, far_retry_vmax=0.06, budget=0.3)), place=place, source=name)
 
 
 def test_a_stalled_flat_layout_is_sewn_again_within_half_a_second():
-    """With a second pull to come, a flat layout's stall is judged over DrapeOptions.retry_stall
+    """With a second pull to come, a flat layout's stall is judged over SewTuning.retry_stall
     windows: GarmentCode's T-shirt on its own body (its sleeve seams stall ~9 cm open at 3 m/s
     from ~0.15 s on) is sewn again after ~0.5 s of sewing, not after 1 s (progress reports come
     every 5 ms of simulated time while sewing), and then sews and drapes."""
@@ -160,7 +160,7 @@ def test_a_stalled_flat_layout_is_sewn_again_within_half_a_second():
     body = resolve_body(str(SAMPLE_BODY))
     spec, place, name = resolve_garment(str(GC_SHIRT), body, None)
     said = []
-    res, rep = run_tryon(body, spec, h=0.03, place=place, source=name,
+    res, rep = run_tryon(body, spec, TryOnOptions(resolution_cm=3.0), place=place, source=name,
                          progress=lambda stage, f, msg: said.append((stage, msg)))
     again = [k for k, (_, m) in enumerate(said) if "sewing again" in m]
     assert len(again) == 1
@@ -312,7 +312,7 @@ def test_a_garmentcode_t_shirt_dresses_a_body_it_was_not_made_for(tmp_path, scan
     if scan:
         arg = str(write_arms_lowered_scan(tmp_path / "scan.obj", 0.0))
     body = resolve_body(arg)
-    _, rep = run_tryon(body, load_pattern(GC_SHIRT), h=0.02)  # (welds close <= half an edge: 1 cm)
+    _, rep = run_tryon(body, load_pattern(GC_SHIRT), TryOnOptions(resolution_cm=2.0))  # (welds close <= half an edge: 1 cm)
     assert "landmarks and arms" in rep["placement"]
     _check_quality(rep)
     assert rep["seam_gap_mm"]["snapped"] == 0
@@ -327,12 +327,12 @@ def test_a_carried_pattern_whose_seams_stay_open_says_the_placement_may_be_why(b
     from engine.errors import SimulationError
     from engine.garment.place import CARRIED_HINT
     from engine.pattern.io import load_pattern
-    from engine.scene.drape import DrapeOptions
     from engine.scene.tryon import run_tryon
 
     body = resolve_body(body_arg)
     with pytest.raises(SimulationError) as e:
-        run_tryon(body, load_pattern(SAMPLE_SKIRT), h=0.05, options=DrapeOptions(sew_budget=0.01, far_retry_vmax=0.0))
+        run_tryon(body, load_pattern(SAMPLE_SKIRT), TryOnOptions(resolution_cm=5.0),
+                  Tuning(sew=SewTuning(budget=0.01, far_retry_vmax=0.0)))
     assert "did not close" in str(e.value)
     assert (CARRIED_HINT in str(e.value)) == carried
 
@@ -350,7 +350,7 @@ def test_a_garment_that_falls_off_the_body_is_refused():
         p.translation = [p.translation[0] + 100.0, p.translation[1], p.translation[2]]  # cm
     with pytest.raises(SimulationError, match=r"fell off the body .* far too large for this body, or its pattern "
                                               r"places it away from the body"):
-        run_tryon(resolve_body("default:female"), spec, h=0.03)
+        run_tryon(resolve_body("default:female"), spec, TryOnOptions(resolution_cm=3.0))
 
 
 def test_sewing_gives_up_when_the_seams_stop_closing():
@@ -371,7 +371,7 @@ def test_sewing_gives_up_when_the_seams_stop_closing():
     with pytest.raises(SimulationError, match=r"^sewing stopped closing after [23].\d s of simulated time \(the widest "
                                               r"gap stayed \d+.\d-\d+.\d cm for 0.5 s\); open seams: "
                                               + side + "(, " + side + r")*\. The garment may be too small") as e:
-        run_tryon(body, spec, h=0.03, place=place, source=name)
+        run_tryon(body, spec, TryOnOptions(resolution_cm=3.0), place=place, source=name)
     assert e.value.too_small and e.value.positions.shape[1] == 3
 
 
@@ -383,16 +383,15 @@ def test_a_drape_that_stays_stretched_is_refused_early():
     (too_tight -4 %) on the coarse M skirt, which drapes at 5-6 %."""
     from engine.body.default import default_body
     from engine.errors import SimulationError
-    from engine.scene.drape import DrapeOptions
     from engine.scene.garments import resolve_garment
     from engine.scene.tryon import run_tryon
 
     body = default_body("female")
     spec, place, name = resolve_garment("skirt", body, "M")
-    opts = DrapeOptions(too_tight=-0.04, refuse_after=0.2, drape_min=0.1)
+    opts = Tuning(drape=DrapeTuning(too_tight=-0.04, refuse_after=0.2, min_time=0.1))
     with pytest.raises(SimulationError, match=r"too small for this body: for 0.2 s of draping it stayed "
                                               r"stretched at least \d+ % where cotton allows 5 %") as e:
-        run_tryon(body, spec, h=0.03, place=place, source=name, options=opts)
+        run_tryon(body, spec, TryOnOptions(resolution_cm=3.0), opts, place=place, source=name)
     assert e.value.too_small and e.value.positions.shape[1] == 3
 
 
@@ -418,7 +417,7 @@ def test_a_dress_on_a_scan_with_the_arms_closer_is_sewn_with_friction(tmp_path):
     assert rep["penetration_mm"]["max"] <= 3.0 and rep["penetration_mm"]["p99"] <= 1.0, rep["penetration_mm"]
     assert rep["strain"]["max"] <= rep["strain"]["threshold"] + 0.01, rep["strain"]
     assert rep["settled"] and rep["cloth_vertices"] < rep["cloth_vertices_unsewn"]
-    # the last shoulder pairs close, or stall and are welded where they are (DrapeOptions.snap_gap)
+    # the last shoulder pairs close, or stall and are welded where they are (SewTuning.snap_gap)
     assert rep["seam_gap_mm"]["max"] <= 20.0, rep["seam_gap_mm"]
     assert rep["shift_mm"]["top"] > -60.0, rep["shift_mm"]  # on the shoulders (fallen: -400)
 
@@ -462,19 +461,19 @@ def test_a_top_on_a_scan_with_the_arms_close_is_dressed_with_the_arms_raised(tmp
 
 @pytest.mark.slow
 def test_a_shirt_sewn_shut_between_close_arms_and_torso_is_dressed_again_with_the_arms_raised(tmp_path):
-    """The 30-degree scan's shirt sewn at 1000 x damping (DrapeOptions.sew_damping): its underarm
+    """The 30-degree scan's shirt sewn at 1000 x damping (SewTuning.damping): its underarm
     seams close as loaded -- at 20 x they stall, and that raises the arms -- and the drape is
     refused 17 % stretched at the armhole. The refusal lies beside the close arms, so the shirt is
     dressed again with them raised and lowered (measured: 5.9 %, penetration 1.9 mm)."""
     from engine.body import resolve_body
-    from engine.scene.drape import DrapeOptions
     from engine.scene.garments import dress_in_size
     from engine.scene.tryon import run_tryon
 
     body = resolve_body(str(write_arms_lowered_scan(tmp_path / "arms30.obj", 30.0)))
 
     def dress(spec, place, name, **kw):
-        return run_tryon(body, spec, options=DrapeOptions(sew_damping=1000.0), place=place, source=name, **kw)
+        return run_tryon(body, spec, TryOnOptions(), Tuning(sew=SewTuning(damping=1000.0)), place=place, source=name,
+                         **kw)
 
     _, rep = dress_in_size("shirt", body, "M", dress)
     assert "dressed with the arms raised 30 degrees" in rep["arms_lowered"]["why"]
@@ -578,7 +577,7 @@ def test_a_short_heavy_avatars_dress_closes_its_shoulder_seams():
     """A short heavy avatar's dress: one pair of a shoulder seam stayed 1.1-1.9 cm open from
     0.3 s on (the strap pulled tight over the shoulder; the strain limit takes back the seam's
     pull), and the whole try-on failed after the 4 s sewing budget, in every size; the stall
-    rule (DrapeOptions.snap_gap) then welded such pairs where they were, M ended tight (12 %)
+    rule (SewTuning.snap_gap) then welded such pairs where they were, M ended tight (12 %)
     and --size auto dressed L. With armholes that follow its thick arms (ARMHOLE_PER_ARM_ROOT,
     2.8 cm deeper here) every pair closes by itself in the size its girths pick. (The stall
     rule is exercised by test_a_dress_on_a_scan_with_the_arms_closer_is_sewn_with_friction.)"""
@@ -618,7 +617,7 @@ def test_coarse_skirt_quality_both_collisions(collision):
 
     body = default_body("female")
     spec, place, name = resolve_garment("skirt", body, "M")
-    res, rep = run_tryon(body, spec, h=0.03, collision=collision, place=place, source=name)
+    res, rep = run_tryon(body, spec, TryOnOptions(resolution_cm=3.0, collision=collision), place=place, source=name)
     assert rep["collision"] == collision
     assert rep["seam_gap_mm"]["max"] <= 30.0 and rep["cloth_vertices"] < rep["cloth_vertices_unsewn"]
     assert rep["penetration_mm"]["max"] <= 3.0 and rep["penetration_mm"]["p99"] <= 1.0, rep["penetration_mm"]
@@ -648,38 +647,38 @@ def test_a_pattern_too_small_is_told_to_grade_it_not_to_pick_a_size():
 def test_collisions_are_checked_as_often_as_the_cloth_moves_far_enough():
     """Sewing checks the body every floor(sew_check_travel / (pull cap x dt)) steps (at most 3),
     draping every floor(drape_check_time / dt) (at most 2): at the default 1.5 cm cloth 3 and 2,
-    at 3 cm (twice the eq. 4 step) every step; DrapeOptions.collide_every sets both; the report
+    at 3 cm (twice the eq. 4 step) every step; Tuning.collide_every sets both; the report
     says what was used, and a drape at 1.5 cm checked that way meets the quality bars. A drape
     stretched past threshold + tight_every_step checks every step from then on."""
     from engine.body.default import default_body
     from engine.errors import InputError
-    from engine.scene.drape import DrapeOptions, _check_options, _drape_every, _sew_every
+    from engine.scene.drape import _drape_every, _sew_every
     from engine.scene.garments import resolve_garment
     from engine.scene.tryon import run_tryon
 
-    o = DrapeOptions()
-    assert (_sew_every(o, 0.147e-3, o.sew_vmax), _drape_every(o, 0.147e-3)) == (3, 2)
-    assert (_sew_every(o, 0.3e-3, o.sew_vmax), _drape_every(o, 0.3e-3)) == (1, 1)
-    assert _sew_every(o, 0.147e-3, 1.5) == 3  # a gentler pull: no more than SEW_CHECK_MAX apart
-    every = DrapeOptions(collide_every=1)
+    o = Tuning()
+    assert (_sew_every(o, 0.147e-3, o.sew.vmax), _drape_every(o, 0.147e-3)) == (3, 2)
+    assert (_sew_every(o, 0.3e-3, o.sew.vmax), _drape_every(o, 0.3e-3)) == (1, 1)
+    assert _sew_every(o, 0.147e-3, 1.5) == 3  # a gentler pull: no more than max_check_every apart
+    every = Tuning(collide_every=1)
     assert (_sew_every(every, 0.147e-3, 3.0), _drape_every(every, 0.147e-3)) == (1, 1)
-    for bad, what in ((DrapeOptions(collide_every=0), "collide_every 0"),
-                      (DrapeOptions(sew_check_travel=-1.0), "sew_check_travel"),
-                      (DrapeOptions(drape_check_time=0.0), "drape_check_time")):
+    for bad, what in ((Tuning(collide_every=0), "collide_every 0"),
+                      (Tuning(sew=SewTuning(check_travel=-1.0)), "check_travel"),
+                      (Tuning(drape=DrapeTuning(check_time=0.0)), "check_time")):
         with pytest.raises(InputError, match=what):
-            _check_options(bad)
+            bad.validate()
 
     body = default_body("female")
     spec, place, name = resolve_garment("skirt", body, "M")
     _, rep = run_tryon(body, spec, place=place, source=name)
     assert rep["collision_every_steps"] == {"sewing": 3, "draping": 2}, rep["collision_every_steps"]
     _check_quality(rep)
-    _, coarse = run_tryon(body, spec, h=0.03, place=place, source=name)
+    _, coarse = run_tryon(body, spec, TryOnOptions(resolution_cm=3.0), place=place, source=name)
     assert coarse["collision_every_steps"] == {"sewing": 1, "draping": 1}, coarse["collision_every_steps"]
     # stretched past the bar (here lowered to the threshold itself: the skirt drapes at 5-6 %),
-    # draping goes back to a check at every step at the first strain check after TIGHT_GRACE
-    from engine.scene.drape import TIGHT_GRACE
-
-    _, tight = run_tryon(body, spec, place=place, source=name, options=DrapeOptions(tight_every_step=0.0))
+    # draping goes back to a check at every step at the first strain check after tight_grace
+    TIGHT_GRACE = DrapeTuning().tight_grace
+    _, tight = run_tryon(body, spec, TryOnOptions(), Tuning(drape=DrapeTuning(tight_every_step=0.0)), place=place,
+                         source=name)
     ce = tight["collision_every_steps"]
     assert ce["draping"] == 2 and TIGHT_GRACE < ce["every_step_from_s"] <= TIGHT_GRACE + 0.0105, ce

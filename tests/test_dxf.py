@@ -56,7 +56,7 @@ def test_the_sample_skirt_comes_back_from_dxf_as_the_same_pattern(tmp_path):
 
 def test_a_catalogue_shirt_with_curved_armholes_comes_back_edge_for_edge(tmp_path):
     from engine.body.default import default_body
-    from engine.pattern.catalogue import make_garment
+    from engine.garment.catalogue import make_garment
 
     spec, _, _ = make_garment("shirt", default_body("female"), "M")
     back, _ = _round_trip(spec, tmp_path)

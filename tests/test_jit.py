@@ -12,8 +12,14 @@ import pytest
 import trimesh
 from numba import njit
 
-from engine.cloth import kernels as K
+from engine.cloth import kernels_carry as KR
+from engine.cloth import kernels_contact as KC
+from engine.cloth import kernels_forces as KF
+from engine.cloth import kernels_integrate as KI
+from engine.cloth import kernels_strain as KS
 from engine.cloth import welds as W
+from engine.cloth.buffers import limits2
+from engine.cloth.config import Control, Sewing, StepConfig
 from engine.cloth.fabrics import get_fabric
 from engine.cloth.model import ClothState, build_model
 from engine.cloth.solver import ClothSolver
@@ -26,7 +32,7 @@ from engine.pattern.spec import PatternSpec
 
 def _serial_kernels():
     out = []
-    for mod in (K, W, Q, M):
+    for mod in (KR, KC, KF, KI, KS, W, Q, M):
         for name in dir(mod):
             f = getattr(mod, name)
             if hasattr(f, "py_func") and f.targetoptions.get("parallel") and "prange" not in _src(f):
@@ -50,32 +56,32 @@ def test_serial_kernels_compile_without_parallel_loops():
     solver = ClothSolver(m, ObjectSpaceCollider(np.asarray(box.vertices), np.asarray(box.faces), tolerance=0.005))
     state = ClothState(g.positions.copy(), np.zeros_like(g.positions))
     pairs = np.array([[0, 1]], np.int64)
-    solver.sewing = (pairs, np.zeros(1, np.bool_), 0.02, 3.0)
+    sewing = Control(sewing=Sewing(pairs, np.zeros(1, np.bool_), 0.02, 3.0))
     for _ in range(5):
-        solver.step(state)
+        solver.step(state, sewing)
     W.hold_welds(state.x, state.v, m.mass, pairs, np.ones(1, np.bool_))
     W.seam_gaps(state.x, pairs, np.zeros(1))
-    K.kinetic_energy(state.v, m.mass), K.max_strain(state.x, m.springs, m.rest, solver.active)
-    K.provot_positions(state.x, m.springs, m.rest, solver.active, 0.05, m.inv_mass, 2, solver.vm_work, False,
-                       solver.contact, solver.contact_n)
-    K.inelastic_guard(state.x, solver.x_guard, state.v)
-    K.hold_and_integrate(state.x, state.v, 1e-5, solver.contact, solver.contact_n, solver.body_v)
+    KI.kinetic_energy(state.v, m.mass), KS.max_strain(state.x, m.springs, m.rest, solver.model.strain_limited)
+    KS.provot_positions(state.x, m.springs, m.rest, solver.model.strain_limited, 0.05, m.inv_mass, 2, solver.buf.work, False,
+                       solver.buf.contact, solver.buf.contact_n)
+    KS.inelastic_guard(state.x, solver.buf.x_guard, state.v)
+    KI.hold_and_integrate(state.x, state.v, 1e-5, solver.buf.contact, solver.buf.contact_n, solver.buf.body_v)
     r = m.runs
-    K.guard_positions(state.x, state.v, m.springs, m.rest, solver.active, 0.05, m.inv_mass, 2, solver.vm_work,
-                      solver.contact, solver.contact_n, 0.001, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run,
-                      solver._guard_limits(0.05), solver._soa, solver._listed, solver._listed_words, m.adj_ptr,
-                      m.adj_spring, solver.x_guard, solver._saved, solver._saved_list)
-    solver.late_guard()
-    K.guard_listed(state.x, state.v, m.springs, m.rest, solver.active, 0.05, m.inv_mass, 2, solver._guard_work,
-                   solver.contact, solver.contact_n, 0.001, solver._listed, solver._listed_words, m.adj_ptr,
-                   m.adj_spring, solver.x_guard, solver._saved, solver._saved_list, solver.vm_work, solver.vm_geo,
-                   solver.vm_ends, 0, solver._near, 0, solver._late_limits(0.05), 0.03)
+    KS.guard_positions(state.x, state.v, m.springs, m.rest, solver.model.strain_limited, 0.05, m.inv_mass, 2, solver.buf.work,
+                      solver.buf.contact, solver.buf.contact_n, 0.001, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run,
+                      limits2(solver.model, 0.05)[solver.buf.runs.fast.perm], solver.buf.soa, solver.buf.listed, solver.buf.listed_words, m.adj_ptr,
+                      m.adj_spring, solver.buf.x_guard, solver.buf.saved, solver.buf.saved_list)
+    solver = ClothSolver(m, solver.collider, StepConfig(late_guard=True))
+    KS.guard_listed(state.x, state.v, m.springs, m.rest, solver.model.strain_limited, 0.05, m.inv_mass, 2, solver.buf.guard_work,
+                   solver.buf.contact, solver.buf.contact_n, 0.001, solver.buf.listed, solver.buf.listed_words, m.adj_ptr,
+                   m.adj_spring, solver.buf.x_guard, solver.buf.saved, solver.buf.saved_list, solver.buf.work, solver.buf.geo,
+                   solver.buf.ends, 0, solver.buf.near, 0, limits2(solver.model, 0.05), 0.03)
     # the response on its own (the solver's contact_rounds does the same work; tests/test_cloth.py
     # compares them), on the last step's points
-    npt = len(solver.points)
-    K.collision_response(state.v, np.zeros(npt, np.int8), np.zeros((npt, 3)), np.zeros((npt, 3)), np.zeros(npt),
-                         np.zeros((npt, 3)), m.n, m.quads, m.tris, 0.005, 0.0, 0.4, 1e-4, solver.contact,
-                         solver.contact_n, solver.body_v, 50.0)
+    npt = len(solver.buf.points)
+    KC.collision_response(state.v, np.zeros(npt, np.int8), np.zeros((npt, 3)), np.zeros((npt, 3)), np.zeros(npt),
+                         np.zeros((npt, 3)), m.n, m.quads, m.tris, 0.005, 0.0, 0.4, 1e-4, solver.buf.contact,
+                         solver.buf.contact_n, solver.buf.body_v, 50.0)
     # the map query, on empty input with the map arrays' types
     Q.query_batch_serial(np.zeros((0, 3)), 0.005, np.zeros((2, 4, 4), np.float32), np.zeros((1, 1, 4), np.float32),
                          False, np.zeros((2, 4), np.int8), np.zeros((2, 4), np.int32), np.zeros((1, 3)),
@@ -135,10 +141,10 @@ def test_serial_kernel_matches_plain_njit(fn):
     v = rng.normal(size=(n, 3))
     if fn == "modify_velocities":
         rest = np.linalg.norm(x[springs[:, 1]] - x[springs[:, 0]], axis=1) * 0.9
-        args = (springs, rest, np.ones(s, np.bool_), 0.05, K.VM_AVERAGE, np.array([0, -9.81, 0.0]), 1e-3,
+        args = (springs, rest, np.ones(s, np.bool_), 0.05, KS.VM_AVERAGE, np.array([0, -9.81, 0.0]), 1e-3,
                 np.zeros((n, 3)), 6, np.zeros(s, np.int32), np.zeros((s, 4)), np.zeros((s, 2), np.int32), 0.002)
         outs = []
-        for f in (getattr(K, fn), njit(fastmath=True)(getattr(K, fn).py_func)):
+        for f in (KS.modify_velocities, njit(fastmath=True)(KS.modify_velocities.py_func)):
             vv = v.copy()
             outs.append((f(x, vv, *args), vv))
         assert outs[0][0] == outs[1][0] and np.allclose(outs[0][1], outs[1][1], atol=1e-12)
@@ -151,7 +157,7 @@ def test_serial_kernel_matches_plain_njit(fn):
         nrm /= np.linalg.norm(nrm, axis=1)[:, None]
         pv = rng.normal(size=(m, 3))
         outs = []
-        for f in (K.collision_response, njit(fastmath=True)(K.collision_response.py_func)):
+        for f in (KC.collision_response, njit(fastmath=True)(KC.collision_response.py_func)):
             vv, c, cn, vb = v.copy(), np.zeros(n, np.bool_), np.zeros((n, 3)), np.zeros((n, 3))
             hits = f(vv, status, nrm, np.zeros((m, 3)), np.full(m, 0.003), pv, n,
                      quads, tris, 0.005, 0.0, 0.4, 1e-3, c, cn, vb, 50.0)
@@ -170,9 +176,9 @@ def test_the_kernel_cache_key_covers_the_kernel_files_it_imports(tmp_path):
     root = tmp_path / "engine"
     shutil.copytree(jit.ENGINE, root, ignore=shutil.ignore_patterns("__pycache__"))
     names = {p.relative_to(root).as_posix() for p in jit.kernel_sources(root)}
-    assert {"jit.py", "cloth/kernels.py", "collide/server.py", "collide/moving.py", "collide/query.py"} <= names
+    assert {"jit.py", "cloth/kernels_forces.py", "collide/server.py", "collide/moving.py", "collide/query.py"} <= names
     assert "cli.py" not in names  # (no kernels)
-    moving, kernels = root / "collide" / "moving.py", root / "cloth" / "kernels.py"
+    moving, kernels = root / "collide" / "moving.py", root / "cloth" / "kernels_forces.py"
     stamp = jit.kernel_stamp.__wrapped__
     before = {f: stamp(f, root) for f in (moving, kernels)}
     helper = root / "collide" / "server.py"  # inlined into moving.py's kernels, not into kernels.py's
@@ -189,8 +195,8 @@ def test_engine_kernels_are_cached_under_that_key():
 
     from engine import jit
 
-    assert K.integrate_positions._cache._impl.locator.__class__ is jit.KernelCacheLocator
-    assert K.integrate_positions._cache._impl.locator.get_source_stamp() == jit.kernel_stamp(Path(K.__file__))
+    assert KI.integrate_positions._cache._impl.locator.__class__ is jit.KernelCacheLocator
+    assert KI.integrate_positions._cache._impl.locator.get_source_stamp() == jit.kernel_stamp(Path(KI.__file__))
     for p in jit.ENGINE.rglob("*.py"):  # every kernel file takes numba's decorators from engine.jit
         if p.name != "jit.py":
             assert "from numba import" not in p.read_text(), p

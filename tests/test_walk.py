@@ -14,7 +14,10 @@ from typer.testing import CliRunner
 from engine.body.motion import BodyTrack
 from engine.body.types import Body
 from engine.cli import app
-from tests.samples import SAMPLE_BODY, write_anim_zip
+from engine.cloth.config import StepConfig
+from engine.scene.request import TryOnOptions
+from engine.scene.tuning import Tuning, WalkTuning
+from tests.samples import write_anim_zip
 
 
 def _box_body(size=0.4):
@@ -271,12 +274,12 @@ def walked():
     from engine.body.default import default_body
     from engine.scene.garments import resolve_garment
     from engine.scene.tryon import run_tryon
-    from engine.scene.walk import WalkOptions, walk_cloth, walk_report
+    from engine.scene.walk import walk_cloth, walk_report
 
     body = default_body("female")
     spec, place, name = resolve_garment("skirt", body, "M")
-    res, rep = run_tryon(body, spec, h=0.03, place=place, source=name)
-    w = walk_cloth(body, res, WalkOptions(seconds=0.8), texel=0.005, tol=res.model.params.tolerance)
+    res, rep = run_tryon(body, spec, TryOnOptions(resolution_cm=3.0), place=place, source=name)
+    w = walk_cloth(body, res, TryOnOptions(seconds=0.8))
     return body, res, w, walk_report(rep, w.report)
 
 
@@ -301,10 +304,10 @@ def test_walking_skirt_stays_on_and_out_of_the_body(walked):
 
 
 def test_walk_springs_are_softer_and_stiffen_when_the_strain_limit_loses(walked):
-    """The walk runs at WalkOptions.stiffness x the drape's springs, at the eq. 4 step of those
+    """The walk runs at TryOnOptions.walk_stiffness x the drape's springs, at the eq. 4 step of those
     (a quarter: twice the drape's step, in whole substeps a frame); a frame whose strain passes
     the threshold + stiffen_at doubles the stiffness, up to the drape's, and says so."""
-    from engine.scene.walk import WalkOptions, walk_cloth
+    from engine.scene.walk import walk_cloth
 
     body, res, w, _ = walked
     r = w.report
@@ -313,11 +316,10 @@ def test_walk_springs_are_softer_and_stiffen_when_the_strain_limit_loses(walked)
     assert r["substeps_per_frame"] in {int(np.ceil(frame_time / (2.0 * res.dt) * (1 + e))) for e in (-1e-3, 1e-3)}
     assert r["dt_ms"] / 1000 <= 2.0 * res.dt * (1 + 1e-3)
     threshold = res.model.fabric.strain_threshold
-    w2 = walk_cloth(body, res, WalkOptions(seconds=0.2, stiffen_at=0.001), texel=0.005,
-                    tol=res.model.params.tolerance)
+    w2 = walk_cloth(body, res, TryOnOptions(seconds=0.2), Tuning(walk=WalkTuning(stiffen_at=0.001)))
     st = w2.report["stiffness"]
     # the first frames past 5.1 % (frames 1 and 2 at the drape's push time, 2 and 3 at the walk's
-    # shorter one, WalkOptions.push_time) double it, then double it again, and it stays at the drape's
+    # shorter one, WalkTuning.step) double it, then double it again, and it stays at the drape's
     (f1, k1), (f2, k2) = [(s["frame"], s["stiffness"]) for s in st["stiffened"]]
     assert (k1, k2) == (0.5, 1.0) and f1 <= 3 and f2 == f1 + 1, st
     assert all(s["strain"] > threshold + 0.001 for s in st["stiffened"]) and st["end"] == 1.0
@@ -334,11 +336,11 @@ def test_maps_rendered_ahead_give_the_same_walk(walked):
     import threading
 
     from engine.collide.maps import render_body_maps
-    from engine.scene.walk import WalkOptions, walk_cloth
+    from engine.scene.walk import walk_cloth
 
     body, res, _, _ = walked
-    runs = [walk_cloth(body, res, WalkOptions(seconds=0.3, reuse_maps=False, render_ahead=ahead), texel=0.005,
-                       tol=res.model.params.tolerance) for ahead in (False, True)]
+    runs = [walk_cloth(body, res, TryOnOptions(seconds=0.3, reuse_maps=False),
+                       Tuning(walk=WalkTuning(render_ahead=ahead))) for ahead in (False, True)]
     assert np.array_equal(runs[0].garment_frames, runs[1].garment_frames)
     assert runs[0].report["map_frames_rendered"] == runs[1].report["map_frames_rendered"] >= 9
     assert not any(t.name.startswith("maps") for t in threading.enumerate())
@@ -355,12 +357,10 @@ def test_walk_report_fields(walked):
     assert report["realtime_factor"] > 0
     assert any("periodic" in line for line in report["left_out"])
     assert report["walk"]["map_frames_rendered"] <= 15 + 40  # the ramp and at most a cycle
-    # ... all rendered before the walking stage (WalkOptions.prerender), not in its wall time
+    # ... all rendered before the walking stage (WalkTuning.prerender), not in its wall time
     assert report["walk"]["map_prerender_seconds"] > 0
     assert report["walk"]["wall_seconds"]["maps_before"] == report["walk"]["map_prerender_seconds"]
-    from engine.scene.walk import WalkOptions
-
-    assert report["walk"]["push_time_ms"] == 1000 * WalkOptions().push_time
+    assert report["walk"]["push_time_ms"] == 1000 * WalkTuning().step.push_time
 
 
 def test_walk_outputs(walked, tmp_path):
@@ -386,7 +386,7 @@ def _walk_cli(tmp_path, *args):
     (["--body", "default:female", "--garment", "skirt", "--speed", "40"], "speed"),
     (["--body", "default:female", "--garment", "skirt", "--fps", "1000"], "--fps"),
     (["--body", "default:female", "--garment", "skirt", "--velocity-mode", "wobble"], "wobble"),
-    (["--body", "default:female", "--garment", "skirt", "--walk-stiffness", "0"], "walking stiffness"),
+    (["--body", "default:female", "--garment", "skirt", "--walk-stiffness", "0"], "--walk-stiffness"),
     (["--body", "{pillar}", "--garment", "skirt"], "arm"),
 ])
 def test_walk_cli_refuses_bad_input(tmp_path, monkeypatch, args, words):
@@ -504,12 +504,12 @@ def test_walking_quality(tmp_path, garment):
     from engine.body.default import default_body
     from engine.scene.garments import resolve_garment
     from engine.scene.tryon import run_tryon
-    from engine.scene.walk import WalkOptions, walk_cloth
+    from engine.scene.walk import walk_cloth
 
     body = default_body("female")
     spec, place, name = resolve_garment(garment, body, "M")
     res, _ = run_tryon(body, spec, place=place, source=name)
-    w = walk_cloth(body, res, WalkOptions(seconds=4.0), texel=0.005, tol=res.model.params.tolerance)
+    w = walk_cloth(body, res, TryOnOptions(seconds=4.0))
     r = w.report
     assert np.all(np.isfinite(w.garment_frames))
     assert r["penetration_mm"]["p99"] <= 2.0 and r["penetration_mm"]["max"] <= 10.0, r["penetration_mm"]
@@ -522,11 +522,10 @@ def test_walking_quality(tmp_path, garment):
 
 def test_object_space_walk(walked):
     """The BVH baseline on the moving body (refitted per frame): same checks as image space."""
-    from engine.scene.walk import WalkOptions, walk_cloth
+    from engine.scene.walk import walk_cloth
 
     body, res, _, _ = walked
-    w = walk_cloth(body, res, WalkOptions(seconds=0.6, collision="object"), texel=0.005,
-                   tol=res.model.params.tolerance)
+    w = walk_cloth(body, res, TryOnOptions(seconds=0.6, collision="object"))
     r = w.report
     assert np.all(np.isfinite(w.garment_frames))
     assert r["penetration_mm"]["p99"] <= 2.0 and r["penetration_mm"]["max"] <= 10.0, r["penetration_mm"]
@@ -535,29 +534,32 @@ def test_object_space_walk(walked):
     assert r["map_frames_rendered"] >= 15  # one refit per frame
 
 
-@pytest.mark.parametrize("field,value,words", [("contact_rounds", 0, "contact_rounds"),
-                                               ("stiffness", 0.0, "stiffness"), ("stiffness", 1.5, "stiffness"),
-                                               ("stiffen_at", 0.0, "stiffen_at"),
-                                               ("collide_every", 17, "collide_every"),
-                                               ("vm_passes", 0, "vm_passes"), ("strain_guard", -0.1, "strain_guard"),
-                                               ("flexion_every", 0, "flexion_every"),
-                                               ("flexion_every", 17, "flexion_every"),
-                                               ("push_time", 0.0, "push_time"), ("push_time", 5.0, "push_time")])
-def test_walk_options_refuse_absurd_solver_settings(field, value, words):
+@pytest.mark.parametrize("make,words", [
+    (lambda: StepConfig(contact_rounds=0), "contact_rounds"),
+    (lambda: TryOnOptions.of(walk_stiffness=0.0), "walk_stiffness"),
+    (lambda: TryOnOptions.of(walk_stiffness=1.5), "walk_stiffness"),
+    (lambda: Tuning(walk=WalkTuning(stiffen_at=0.0)).validate(), "stiffen_at"),
+    (lambda: Tuning(collide_every=17).validate(), "collide_every"),
+    (lambda: StepConfig(vm_passes=0), "vm_passes"), (lambda: StepConfig(strain_guard=-0.1), "strain_guard"),
+    (lambda: StepConfig(flexion_every=0), "flexion_every"), (lambda: StepConfig(flexion_every=17), "flexion_every"),
+    (lambda: StepConfig(push_time=0.0), "push_time"), (lambda: StepConfig(push_time=5.0), "push_time"),
+    (lambda: TryOnOptions.of(seconds=100.0), "seconds"), (lambda: TryOnOptions.of(fps=1.0), "fps")])
+def test_walk_options_refuse_absurd_solver_settings(make, words):
     from engine.errors import InputError
-    from engine.scene.walk import WalkOptions
 
-    WalkOptions().validate()  # the defaults are valid
+    Tuning().validate()  # the defaults are valid
     with pytest.raises(InputError, match=words):
-        WalkOptions(**{field: value}).validate()
+        make()
 
 
 def test_collision_checks_keep_pace_with_the_body():
     """By default the walk checks collisions as often as keeps the body's bulk travel between two
-    checks within CHECK_TRAVEL: every 8th step at a normal walk, more often when faster."""
+    checks within check_travel: every 8th step at a normal walk, more often when faster."""
     from engine.body.default import default_body
     from engine.body.motion import WalkParams, walk_track
-    from engine.scene.walk import CHECK_TRAVEL, MAX_CHECK_EVERY, check_every
+    from engine.scene.walk import check_every
+
+    CHECK_TRAVEL, MAX_CHECK_EVERY = WalkTuning().check_travel, WalkTuning().max_check_every
 
     body = default_body("female")
     dt = 0.000115
@@ -758,9 +760,9 @@ def test_queries_shared_with_the_server_answer_as_one_thread_does():
 def test_a_collider_that_fills_faces_answers_as_for_points_made_whole():
     """With fill_faces the solver writes only the vertex rows of the points it asks for; the
     collider's query chunks (either thread's) make the face rows -- the same rows, bit for bit,
-    as K.collision_points makes -- and answer them as they answer points made whole, queried and
+    as KC.collision_points makes -- and answer them as they answer points made whole, queried and
     prefetched over a few steps round a moving box."""
-    import engine.cloth.kernels as K
+    import engine.cloth.kernels_contact as KC
     import engine.collide.moving as mv
     from engine.collide.maps import MapRenderer
     from engine.collide.moving import TrackCollider
@@ -787,8 +789,8 @@ def test_a_collider_that_fills_faces_answers_as_for_points_made_whole():
             t = 0.2 + step * 0.002
             x = x0 + (0.0, 0.0, t - 0.2) + rng.normal(0.0, 0.004, x0.shape)
             v = rng.normal(0.0, 0.05, x0.shape)
-            K.collision_points(x, v, 0.001, quads[:0], tris[:0], pf)  # the vertex rows only
-            K.collision_points(x, v, 0.001, quads, tris, pw)
+            KC.collision_points(x, v, 0.001, quads[:0], tris[:0], pf)  # the vertex rows only
+            KC.collision_points(x, v, 0.001, quads, tris, pw)
             assert not np.array_equal(pf, pw)
             answers = []
             for c, pts in ((filled, pf), (whole, pw)):
@@ -798,8 +800,8 @@ def test_a_collider_that_fills_faces_answers_as_for_points_made_whole():
             for g, want in zip(*answers):
                 assert np.array_equal(g, want)
             if step % 2 == 0:  # (into arrays of their own, as the solver's: read while it steps on)
-                K.collision_points(x, v, 0.004, quads[:0], tris[:0], qf)
-                K.collision_points(x, v, 0.004, quads, tris, qw)
+                KC.collision_points(x, v, 0.004, quads[:0], tris[:0], qf)
+                KC.collision_points(x, v, 0.004, quads, tris, qw)
                 for c, pts in ((filled, qf), (whole, qw)):
                     assert c.prefetch(pts, 0.002)
         assert np.any(answers[0][0] == 2) and np.any(answers[0][0] == 0)

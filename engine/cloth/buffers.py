@@ -79,8 +79,8 @@ class StepBuffers:
                    hit_buf=np.zeros(m, dtype=np.int32), touched_buf=np.zeros(n, dtype=np.int32),
                    x_guard=np.zeros((n, 3)), saved=np.zeros(n, dtype=np.uint8),
                    saved_list=np.zeros(n, dtype=np.int32), guard_work=np.zeros(s, dtype=np.int32),
-                   guard_lim2=np.ascontiguousarray(_limits2(model, threshold)[runs.fast.perm]),
-                   late_lim2=np.ascontiguousarray(_limits2(model, threshold)))
+                   guard_lim2=np.ascontiguousarray(limits2(model, threshold)[runs.fast.perm]),
+                   late_lim2=np.ascontiguousarray(limits2(model, threshold)))
 
     def restiffen(self, model: ClothModel) -> None:
         """The spring properties of `model` (the same springs, other stiffness)."""
@@ -95,7 +95,7 @@ def spring_props(model: ClothModel, runs: SpringRuns, dtype) -> np.ndarray:
                                 dtype=dtype)
 
 
-def _limits2(model: ClothModel, threshold: float) -> np.ndarray:
+def limits2(model: ClothModel, threshold: float) -> np.ndarray:
     """By model index: a hair below the squared length at which a spring passes `threshold` -- a
     superset of the long ones, whatever the rounding -- and inf for springs the strain limit
     leaves alone."""

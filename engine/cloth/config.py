@@ -45,10 +45,10 @@ class StepConfig:
                 raise InputError(f"{name} {k}: use a whole number {lo} .. {hi}")
         if self.strain_guard is not None and not (0.0 <= self.strain_guard <= 0.5):
             raise InputError(f"strain_guard {self.strain_guard}: use 0 .. 0.5 (or None: off)")
-        for name in ("guard_step", "recover", "push_time", "requery_move"):
+        for name, hi in (("guard_step", 0.01), ("recover", 1e9), ("push_time", 0.2), ("requery_move", 0.05)):
             v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise InputError(f"{name} {v}: use a positive number")
+            if not (0 < v <= hi):
+                raise InputError(f"{name} {v}: use a positive number up to {hi:g}")
 
     @property
     def mode(self) -> int:

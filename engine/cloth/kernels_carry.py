@@ -8,8 +8,6 @@ each point was then); status (M,) int8, normal (M, 3), depth (M,) as a collider 
 
 from __future__ import annotations
 
-import numpy as np
-
 from engine.jit import njit, serial_kernel
 
 MIN_NZ = 0.2  # a carried depth changes at most 1 / MIN_NZ x the move along the normal (_depth_rate)

@@ -9,7 +9,7 @@ import numpy as np
 
 from engine.collide.base import Collider
 from engine.collide.maps import CollisionMaps
-from engine.collide.query import query_point_into, query_batch_serial, query_rows_serial
+from engine.collide.query import query_batch_serial, query_point_into, query_rows_serial
 from engine.collide.server import (HELP_WAIT, SpinServer, StallWatch, after_help, chunk_done, claim, helper_default,
                                    register_job)
 from engine.jit import serial_kernel

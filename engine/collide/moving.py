@@ -74,7 +74,6 @@ from __future__ import annotations
 import math
 import time
 from collections import namedtuple
-
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
@@ -84,7 +83,7 @@ from engine.body.types import Body
 from engine.collide.base import Collider
 from engine.collide.collider import alloc_answers
 from engine.collide.gl import drop_thread_context
-from engine.collide.maps import CollisionMaps, MapRenderer
+from engine.collide.maps import CollisionMaps
 from engine.collide.query import query_point_into
 from engine.collide.server import (ASKED, HELP_WAIT, SERVER_CHUNKS, SOLVER_CHUNKS, SpinServer, StallWatch, after_help,
                                    chunk_done, claim, helper_default, register_job)

@@ -20,7 +20,8 @@ import numpy as np
 
 from engine.body.measure import slice_stack
 from engine.body.types import SEGMENTS, Body
-from engine.errors import InputError
+from engine.errors import InputError, TryonError
+from engine.pattern.catalogue import arm_joints, chart_of
 from engine.pattern.spec import PanelHint
 
 CLEARANCE = 0.02  # m between the body and a freshly placed panel
@@ -579,7 +580,6 @@ def pattern_placement(spec, body: Body):
     and default:male before its 5 cm shoulder seams closed; wrapped, it sews on both.
     Returns (placement, a note or None)."""
     from engine.body.measure import measure
-    from engine.errors import TryonError
     from engine.garment.garment import spec_placement
     from engine.pattern import geometry as geo
 
@@ -660,9 +660,6 @@ def _arms_of(body: Body, m) -> dict[str, np.ndarray] | None:
     """The body's arm joints (engine.pattern.catalogue.arm_joints): from its rig, or from the
     default skeleton fitted to it (a scan; the chart of its measurements `m` picks which);
     None when neither can be had."""
-    from engine.errors import TryonError
-    from engine.pattern.catalogue import arm_joints, chart_of
-
     arms = arm_joints(body)
     if arms is None:
         from engine.body.fit import fit_rig

@@ -38,7 +38,7 @@ from engine.cloth.config import Control
 from engine.cloth.model import ClothState
 from engine.cloth.solver import ClothSolver
 from engine.errors import InputError
-from engine.scene.drape import DrapeResult, Progress, dressing_config, drape
+from engine.scene.drape import DrapeResult, Progress, drape, dressing_config
 from engine.scene.request import TryOnOptions
 from engine.scene.tuning import Tuning
 

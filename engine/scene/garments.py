@@ -8,7 +8,6 @@ from engine.body.types import Body
 from engine.errors import InputError
 from engine.pattern.io import load_pattern
 
-
 PATTERN_SIZE_ADVICE = "a pattern has one size: grade it larger for this body"
 
 
@@ -27,7 +26,8 @@ def resolve_garment(arg: str, body: Body, size: str | None = "M"):
         spec = load_pattern(path)
         return spec, None, path.name
     size = size or "M"
-    from engine.pattern.catalogue import CATALOGUE, make_garment
+    from engine.garment.catalogue import make_garment
+    from engine.pattern.catalogue import CATALOGUE
 
     if arg in CATALOGUE:
         return make_garment(arg, body, size)
@@ -120,7 +120,8 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
     and so are the larger sizes --size auto goes on to; if the arms cannot be raised, the
     try-on ends with that reason, in any size."""
     from engine.errors import SimulationError
-    from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES, make_garment, recommend_size
+    from engine.garment.catalogue import make_garment
+    from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES, recommend_size
 
     lifted = []  # the ArmLift, once the arms were found in the way
 
@@ -192,7 +193,8 @@ def _dress_auto(arg: str, body: Body, attempt, note=None):
     fits is returned; when none does, the drape that came closest (a tight one before one that
     slid) with a warning naming every size tried and why, or the last refusal raised."""
     from engine.errors import SimulationError
-    from engine.pattern.catalogue import SIZES, make_garment, recommend_size
+    from engine.garment.catalogue import make_garment
+    from engine.pattern.catalogue import SIZES, recommend_size
 
     first = i = SIZES.index(recommend_size(arg, body))
     tried: list[dict] = []
