@@ -210,6 +210,13 @@ def write_table(rows, out: Path, r: dict) -> Path:
              f"{r['cells']} cells: {r['dress_and_walk']} dress and walk ({100 * r['dress_and_walk_rate']:.1f} %), "
              f"{r['clean']} clean ({100 * r['clean_rate']:.1f} %)", "", "```"]
     lines += [cell_line(body, c) for body, cells in rows for c in cells]
+    lines += ["```", "", "Realtime factor of the walk, median over the runs of each body (`--repeat`):", "", "```"]
+    rt: dict = {}
+    for body, cells in rows:
+        for c in cells:
+            if c.get("realtime") is not None and not c.get("same_as"):
+                rt.setdefault((body, c["garment"]), []).append(c["realtime"])
+    lines += [f"{b:34s} {g:16s} {np.median(v):.3f}  ({', '.join(f'{x:.3f}' for x in v)})" for (b, g), v in rt.items()]
     lines += ["```", ""]
     p = out / "results.md"
     p.write_text("\n".join(lines))
@@ -258,12 +265,17 @@ def main(argv=None) -> int:
     ap.add_argument("--garments", help=f"comma-separated, of {', '.join(GARMENTS)}")
     ap.add_argument("--seconds", type=float, default=2.0, help="walking time per cell (s)")
     ap.add_argument("--no-reuse", action="store_true", help="run bodies that load back as an earlier one")
+    ap.add_argument("--repeat", type=int, default=1, help="run the body list this many times in turn (interleaved "
+                    "timings: a scan's realtime factor against the default body's, side by side)")
     ap.add_argument("--out", type=Path, default=ROOT / "out" / "bench_bodies")
     ap.add_argument("--list", action="store_true", help="print the bodies and garments and stop")
     args = ap.parse_args(argv)
     bodies = list(QUICK_BODIES) if args.quick else all_bodies()
     if args.bodies:
         bodies = [b.strip().replace(";", ",") for b in args.bodies.split(",") if b.strip()]
+    if args.repeat > 1:
+        args.no_reuse = True
+        bodies = bodies * args.repeat
     garments = list(QUICK_GARMENTS if args.quick and not args.garments else
                     (args.garments.split(",") if args.garments else GARMENTS))
     bad = [g for g in garments if g not in GARMENTS]

@@ -139,6 +139,12 @@ def _fit(scan: Body, ms, preset: str, notes: list[str]) -> Body:
     tree = cKDTree(tv)
     # 4. weights and segments from the nearest mapped template vertex facing the same way
     dist, near = _nearest_facing(tv, tmpl.faces, scan, tree)
+    if np.median(dist) > FIT_MEDIAN_MAX:
+        why = "; ".join(ms.notes)
+        raise InputError(f"the default skeleton does not fit this body: fitted, the default body is "
+                         f"{np.median(dist) * 1000:.0f} mm from its surface (median; a scan of a person: under "
+                         f"{FIT_MEDIAN_MAX * 1000:.0f}){f' ({why})' if why else ''}; it should be a standing person, "
+                         "legs apart and arms apart from the body")
     # 5. smoothed below the waist, where the walk bends the body most (hips, knees)
     waist = ms.waist_height if np.isfinite(ms.waist_height) else SMOOTH_BELOW * scan.height
     idx_s, w_s = smooth_weights(scan.vertices, scan.faces, rig.skin_indices[near], rig.skin_weights[near],
@@ -153,6 +159,8 @@ def _fit(scan: Body, ms, preset: str, notes: list[str]) -> Body:
                 rig=new_rig, notes=notes, to_world=scan.to_world)
 
 
+FIT_MEDIAN_MAX = 0.04  # m: a fit whose median distance to the scan is larger is refused (measured: the
+# sample scan 11 mm, the SMPL woman 17-19 mm, the default bodies in any pose 0-4 mm; a 1.7 m pillar 111 mm)
 SMOOTH_ARM_FROM = 0.12  # m from the shoulder joint: arm vertices further out are smoothed too
 
 

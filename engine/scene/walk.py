@@ -14,7 +14,8 @@ v_dir = g dt + v_object (eq. 6 and §3.2's two rules) can be chosen, but is not 
 Softer springs while walking (TryOnOptions.walk_stiffness, default 0.25 x the drape's stretch and
 shear springs): the eq. 4 step grows as 1 / sqrt of it, and the strain limit (velocity
 modification, the strain guard) holds the fit, as in seed 003 §4. Where it cannot -- a band the
-moving body wedges -- a frame whose strain max passes the fabric's threshold + WalkTuning.stiffen_at
+moving body wedges -- a frame whose strain passes the fabric's threshold + WalkTuning.stiffen_at
+over at least WalkTuning.stiffen_springs springs (spread_strain), or twice that past it at one,
 doubles the stiffness (up to the drape's) for the rest of the walk and the report says so.
 
 A periodic walk's maps (the ramp and one cycle) are rendered before the walking stage
@@ -165,14 +166,18 @@ def walk_cloth(body: Body, drape: DrapeResult, request: TryOnOptions = TryOnOpti
             x = state.x
             strain = _check_frame(solver, state, i, track, lo, hi)
             frames[i] = x
-            if strain > stiffen_strain and stiffness < 1.0:  # the strain limit is losing: stiffer springs
+            # the strain limit is losing over a region, or badly at one spring: stiffer springs
+            spread = spread_strain(model, x, t.stiffen_springs) if strain > stiffen_strain else 0.0
+            if (spread > stiffen_strain or strain > stiffen_strain + t.stiffen_at) and stiffness < 1.0:
                 stiffness = min(1.0, 2.0 * stiffness)
                 model, sub, dt, every = walking_model(stiffness)
                 solver.restiffen(model, dt)
                 control.collide_every = every
                 stiffened.append({"frame": i, "strain": strain, "stiffness": stiffness})
+                why = (f"{t.stiffen_springs} springs reached {100 * spread:.1f} %" if spread > stiffen_strain else
+                       f"a spring reached {100 * strain:.1f} %")
                 left.append(f"the softer walking springs from frame {i} on ({stiffness:g} x the drape's now), "
-                            f"because a spring reached {100 * strain:.1f} % strain")
+                            f"because {why} strain")
             strains.append(strain)
             progress("walking", i / n_frames, f"frame {i}/{n_frames}, strain {100 * strain:.1f} %")
             if observer is not None:  # a viewer follows the walker: both relative to the root
@@ -260,6 +265,16 @@ def _walk_collider(body: Body, drape: DrapeResult, track: BodyTrack, request: Tr
         return collider, None
     renderer = make_renderer()
     return TrackCollider(track, renderer, tol=tol, keep=keep), renderer
+
+
+def spread_strain(model, x: np.ndarray, n: int) -> float:
+    """The strain of the n-th most stretched of the model's strain-limited springs at positions x."""
+    s = model.springs[model.strain_limited]
+    if len(s) == 0:
+        return 0.0
+    strain = np.linalg.norm(x[s[:, 1]] - x[s[:, 0]], axis=1) / model.rest[model.strain_limited] - 1.0
+    n = min(n, len(strain))
+    return float(np.partition(strain, len(strain) - n)[len(strain) - n])
 
 
 def _check_frame(solver: ClothSolver, state: ClothState, i: int, track: BodyTrack, lo: np.ndarray,
