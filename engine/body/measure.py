@@ -683,10 +683,15 @@ def _arm_cuts(prof: _Profile, armpit: float, side: float) -> list[tuple[int, lis
             if out:
                 break
             continue
-        w = np.array([p.length for p in arm])
-        last = (np.array([p.centroid for p in arm]) * w[:, None]).sum(axis=0) / w.sum()
+        last = _centre(arm)
         out.append((i, arm))
     return out
+
+
+def _centre(pieces: list[Piece]) -> np.ndarray:
+    """(2,) the length-weighted centre of the pieces' centres."""
+    w = np.array([p.length for p in pieces])
+    return (np.array([p.centroid for p in pieces]) * w[:, None]).sum(axis=0) / w.sum()
 
 
 def _hanging_arm(prof: _Profile, armpit: float, side: float) -> tuple[np.ndarray, np.ndarray]:
@@ -694,8 +699,7 @@ def _hanging_arm(prof: _Profile, armpit: float, side: float) -> tuple[np.ndarray
     to where the arm ends."""
     cents, widths = [], []
     for i, arm in _arm_cuts(prof, armpit, side):
-        w = np.array([p.length for p in arm])
-        c = (np.array([p.centroid for p in arm]) * w[:, None]).sum(axis=0) / w.sum()
+        c = _centre(arm)
         cents.append([c[0], prof.ys[i], c[1]])
         widths.append(hull_perimeter(np.vstack([p.points for p in arm])))
     return np.array(cents).reshape(-1, 3), np.array(widths)
@@ -732,8 +736,7 @@ def _held_out_arm(v: np.ndarray, f: np.ndarray, acromion: np.ndarray, side: floa
             if cents:
                 break
             continue
-        w = np.array([p.length for p in arm])
-        c = (np.array([p.centroid for p in arm]) * w[:, None]).sum(axis=0) / w.sum()
+        c = _centre(arm)
         cents.append([x, c[0], c[1]])
         widths.append(hull_perimeter(np.vstack([p.points for p in arm])))
     return np.array(cents).reshape(-1, 3), np.array(widths)
