@@ -82,7 +82,7 @@ def main() -> None:
           f"walking springs x{opts.stiffness:g} of the drape's (stiffer where a frame's strain passed the fabric's "
           f"threshold + {opts.stiffen_at:g}); ms per frame of the walking stage (maps: the wait for maps "
           "rendered one frame ahead in a helper thread, and the float16 expansions). Reused maps: the ramp's and "
-          "one cycle's maps are rendered before the walking stage (WalkOptions.prerender; 'maps before s', not in "
+          "one cycle's maps are rendered before the walking stage (WalkTuning.prerender; 'maps before s', not in "
           "the walking stage's realtime factor; 'with maps' counts them in)")
     print("| product | vertices | maps | s/frame | frames/s | realtime | with maps | maps before s | maps ms | cloth ms "
           "| collision ms | seed vertices | seed s/frame | seed frames/s |")

@@ -21,33 +21,9 @@ Sources (typical values; real bolts vary by +-30 %):
 
 The simulation uses the measured stretch and shear stiffness times `ClothParams.stiffness_scale`
 (default 0.03): the velocity modification caps the strain at the threshold, which is the point of
-seed 003 §4 -- softer springs allow a larger stable time step (eq. 4). Measured here: much softer
-springs (0.0005-0.002) let the strain limit lose where the body pushes cloth outward (a waistband
-on the hips, 20-25 % strain), so the default stays at 0.03. Measured on 2026-12-02 with the
-drape's strain guard (positions held at threshold + 0.9 %): at 0.01 (eq. 4 step 0.25 ms instead
-of 0.14) the catalogue's dress, skirt, trousers and shirts and the sample skirt draped within the
-bars in about half the iterations (the dress 5.5k instead of 10.5k) but every one ended at the
-guard's cap (5.86-5.90 % against the 6 % bar: the guard, not the springs, holds the fit); at
-0.005 (0.36 ms) a shirt ended at 6.3 %, a dress's shoulder seams stalled and were snapped and the
-sample skirt did not settle. Measured again on 2026-12-04 on default:male too: at 0.01 its M
-trousers slid 77 mm down the body (44 at 0.03), hems on the feet, and ended at 6.71 % strain
-(reported tight; 6.60 % at 0.015); at 0.02 they hold (5.90 %) but take 3,292 iterations
-(3,217 at 0.03). At 0.01 the other nine catalogue drapes took 21-53 % fewer iterations (the
-M dress on default:female 1,755 instead of 2,809; whole 0.97 s instead of 1.43-1.54 s at 4,374
-vertices) at 5.88-5.92 % strain (the dress looked the same) -- so the default stays at 0.03 until the
-waistband problem below is solved. Nor sewing alone at a third of the springs (welded at the
-full ones): the drape then spends the strain sewing left (default:female's dress 3,536
-draping iterations instead of 1,836; its shirt did not settle within the 6 s budget).
-Why (measured and worked out in the session of 2026-11-30): a band around the hips is a ring;
-its springs can only shorten by moving the ring inward, and a spring-by-spring modification moves
-their ends along the ring instead, taking off about (edge / radius)^2 / 2 of the excess per pass
-(0.5 % for a 1.5 cm edge on a 15 cm radius). With stiff springs the spring forces, all applied at
-once, carry the hoop tension; with soft springs and a large step (scale 5e-6: 7.8 ms) the band
-stretches 60-90 % over the hips even with the conditions judged at the end of the step. Solving
-the strain limit and the contacts together (conjugate gradients with an active set; sequential
-impulses with warm starts) held the ring in free fall but not where the body wedges it (the hoop
-impulse needed is ~ 1 / (edge / radius x slope) times the load, and the solve must be that much
-more exact); that is the open problem behind the iteration counts.
+seed 003 §4 -- softer springs allow a larger stable time step (eq. 4), but much softer springs let
+the strain limit lose where the body pushes cloth outward (a waistband on the hips), so the
+default stays at 0.03 (docs/tuning.md, `stiffness_scale`).
 """
 
 from __future__ import annotations

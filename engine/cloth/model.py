@@ -13,25 +13,10 @@ its springs (for a point on one spring this is the paper's K; on a grid a point 
 springs, and the single-spring reading of eq. 4 measured unstable here -- see
 tests/test_cloth.py).
 Eq. 4 assumes equal point masses; lumped masses along a clipped outline can be much smaller
-(sliver triangles), so every point gets at least MASS_FLOOR x the median mass -- a fraction
-of the garment's weight (measured: +1.2 % on the sample skirt at 1.5 cm, +2.4 % at 3 cm) --
-rather than letting slivers dictate the step. Then the points whose m / K lies below the 5th
-percentile get the mass that brings them up to it (selective mass scaling, as explicit
-structural codes do): measured on the catalogue at 1.5 cm, +0.04-0.6 % of the garment's weight
-for a step 1.03-1.28 x longer. Not further (measured 2026-12-04, the catalogue's five garments
-in M on default:female and default:male): the 20th or 50th percentile is the grid's interior,
-a step 1.22 x longer (0.148 -> 0.18 ms) for +3.5-6.5 % of the welded garment's weight on its
-edges and seams, but the ten drapes took 26,892 / 25,676 iterations instead of 28,497 (-6 /
--10 %): sewing 20 % fewer, while draping went anywhere from -57 % (default:male's sleeveless
-shirt) to +52 % (its trousers, p20) and +60 % (its dress, p50), and default:female's shirt
-ended at 6.01 % strain (bar 6 %) at p20. Walking (4 s, default:female, M; a fixed simulated
-time, so the step counts): at p50 the dress took 93 steps a frame instead of 113, but its
-realtime factor (scripts/bench_walk.py, two interleaved rounds on this noisy machine) was
-0.68-0.82 against 0.65-0.71, its strain peak 14.1 % against 12.3 %, and the skirt's peak
-passed the walk's stiffening rule (15.6 %; 131 steps a frame from then on instead of 112).
-The lifted points are the panels' outlines and the row inside them (~90 % of those below the
-median), where a sewn garment's seam and hem allowances do add weight -- a way to take the
-step further, if the drape's settling and the walk's strain allow it.
+(sliver triangles), so every point gets at least MASS_FLOOR x the median mass -- a fraction of the
+garment's weight -- rather than letting slivers dictate the step. Then the points whose m / K lies
+below the MASS_SCALE_PERCENTILE-th percentile get the mass that brings them up to it (selective
+mass scaling, as explicit structural codes do; docs/tuning.md).
 """
 
 from __future__ import annotations
@@ -109,7 +94,7 @@ MIN_RUN = 8  # shortest run of springs the force pass takes as one vector loop (
 
 @dataclass(frozen=True, eq=False)
 class SpringRuns:
-    """The springs ordered for the force pass (engine.cloth.kernels.eval_forces_and_integrate):
+    """The springs ordered for the force pass (engine.cloth.kernels_forces.eval_forces_and_integrate):
     runs first -- springs (a0 + t, b0 + t) for t < L, L >= MIN_RUN, as a grid row and the next
     row (or the same row shifted) give them -- then the rest.
     perm (S,) int64: the model's index of each spring in this order; springs (S, 2) int32 =
@@ -218,7 +203,7 @@ class ClothState:
 def _pair_keys(pairs: np.ndarray) -> np.ndarray:
     """(P,) int64 keys of (P, 2) pairs of indices >= 0, in the pairs' lexicographic order: np.unique
     of the keys is np.unique(pairs, axis=0) (same order, same first indices), without its slow
-    row-wise sort (measured: 27 of the 49 ms the dress's two models took)."""
+    row-wise sort."""
     p = pairs.astype(np.int64)
     return p[:, 0] * (int(p.max(initial=0)) + 1) + p[:, 1]
 
@@ -444,7 +429,7 @@ def weld_model(model: ClothModel, vertex_map: np.ndarray, uv: np.ndarray | None 
     # a spring on both sides of a seam keeps the longer rest length: where the two stitched edges
     # differ in length (eased in, up to the 10 % the validation allows), the shorter rest would
     # hold the seam at the short edge's length and leave the long side's springs along the seam
-    # stretched past the strain limit for good (measured: 7.7 % on the sample skirt's waist)
+    # stretched past the strain limit for good
     longest = np.full(len(first), -np.inf)
     np.maximum.at(longest, group.ravel(), rest)
     order = np.argsort(first)

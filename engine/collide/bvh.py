@@ -538,7 +538,7 @@ def interp_batch(faces, face, bary, field, out):
 def collide_batch(points, tol, max_d2, node_lo, node_hi, node_a, node_n, prim, tri_xyz, faces,
                   face_n, edge_n, vert_n, vvel, has_vel, status, normal, velocity, depth):
     """The collider protocol per point (ObjectSpaceCollider.query); outputs preallocated. Serial:
-    it runs every simulation step (see engine/cloth/kernels.py on parallel step kernels)."""
+    it runs every simulation step (see engine/jit.py on parallel step kernels)."""
     for p in range(points.shape[0]):
         r = bvh_signed(points[p, 0], points[p, 1], points[p, 2], max_d2, node_lo, node_hi,
                        node_a, node_n, prim, tri_xyz, faces, face_n, edge_n, vert_n)
@@ -779,9 +779,8 @@ WINDING_CHECK = 64  # penetration_depth asks at most this many points again by w
 def penetration_depth(bvh: MeshBVH, points) -> tuple[np.ndarray, int]:
     """(depth (N,) metres inside the body, 0 outside; how many points the sign put inside and
     the winding number outside). The pseudonormal sign needs a cleanly closed surface; a
-    walking body's skin can fold inside out (measured: behind the sample scan's bent knees, its
-    weights fitted from the default body, in the skirt's walk), and points 5-8 cm away read 46-98 mm
-    "inside" (0 by winding number and by ray parity). The points that read inside (the deepest
+    walking body's skin can fold inside out (behind a scan's bent knees), and points centimetres
+    away then read "inside". The points that read inside (the deepest
     WINDING_CHECK of them) are asked again by winding number, which a fold does not fool."""
     pts = np.asarray(points, dtype=np.float64)
     sd = bvh.signed_distance(pts)

@@ -102,9 +102,7 @@ class MapCollider(Collider):
         With `helper`, SHARE_ROWS rows or more are answered in chunks that a helper thread
         (engine.collide.server.SpinServer; it spins while queries come, and its kernel returns
         after ~0.1 s without one) and this thread claim as they come: each point's answer is
-        its rows alone, so the answers are the same bit for bit whoever answers which chunk.
-        Measured on the drape of default:female's dress (1.63 cm): a step asks all its contacts
-        again every few steps (~1,000-2,000 rows), the others a few points alone."""
+        its rows alone, so the answers are the same bit for bit whoever answers which chunk."""
         if points.shape[0] != self._n:
             return self.query(points)
         self.stats["rows"] += n_rows

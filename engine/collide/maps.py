@@ -534,9 +534,7 @@ def _finish_maps(surf, vel, has_vel, depth, layout, ring, kind, side_src):
     need no clear: every empty pixel is overwritten here. The nearest body pixel within `ring`
     (Euclidean, pixel centres) is found separably: nearest body column per row first, then
     the best row -- exact, and (2*ring+1) reads per pixel instead of (2*ring+1)^2.
-    One thread: run over rows in parallel it took 29 ms a walking frame's maps (six
-    segments) where this loop takes 1.3-1.6 ms -- twelve parallel regions a frame, each waiting
-    for the second core's thread (and llvmpipe's), measured on this 2-vCPU machine."""
+    One thread: in parallel over rows, each parallel region waits for the other core's thread."""
     wa = surf.shape[1]
     for m in range(layout.shape[0]):
         h, w, r0, cf, cb = layout[m, 0], layout[m, 1], layout[m, 2], layout[m, 3], layout[m, 4]

@@ -16,12 +16,8 @@ that frame before asking.
 
 Asking the maps is the costliest part of a step, and most cloth points are far from the body or
 move with it: each point keeps its last answer (in the root's frame) and asks again only when it
-may be stale (_query_cached) -- measured on the walking dress (4374 vertices, 9097 points), 13 %
-of the points a step; 1.9 instead of 2.6 ms a step. (Measured again 2026-12-01, checks every 4th
-step: 37 % of the points a check, 0.71 ms; most of them because an answer is at most MAX_AGE
-old -- a clear point beside a limb, outside every map, has no distance to test. Trusting the
-distance test alone for clear points asked 2214 instead of 3366 a check but let a swinging leg
-reach points unseen: penetration max 3.1 -> 13.5 mm.)
+may be stale (_query_cached). A clear point is asked again at least every MAX_AGE: beside a limb,
+outside every map, it has no distance to test.
 
 Near the band: the maps are asked with the band widened by NEAR (1 mm) more, and a point they
 find a surface for -- a contact, or a clear point close to the band -- keeps that answer and is
@@ -32,25 +28,14 @@ The query server (`prefetch`): right after a collision check the solver predicts
 points will be at the next check, and a helper thread answers them for that time while the cloth
 steps on; the next check's query then finds most answers fresh. The thread
 (engine.collide.server.SpinServer) runs one nogil kernel per frame's maps (engine.collide.server.serve) that spins
-between requests, handed over through atomic control words -- no GIL, no sleeping: a pool
-thread woken per request started ~0.25 ms late (median; 0.7 ms at the 90th percentile) and
-took the GIL twice a request, and the cloth steps
-slowed by more than the query saved (measured; a worker process with shared memory spent as
-long handing requests over). Measured, scripts/bench_ab.py --walk 4 on the 3,883-vertex dress,
-six interleaved rounds: 79-98 instead of 101-128 ms a frame in five, worse in one (134 against
-114, in a slow period of the machine).
+between requests, handed over through atomic control words -- no GIL, no sleeping (a thread
+woken per request starts too late to pay).
 Every request -- the prefetch, and the check's own query of the points where they are -- is
 answered in chunks of CHUNK points that either thread claims (_work): the server starts on a
 request at once, and the solver's thread, when it needs the answers, takes the chunks not yet
 claimed instead of waiting (SpinServer.help), then waits only for the chunks the server holds. A point's
 answer depends on its own rows alone, so the answers are the same bit for bit whoever answers
-which chunk (tests/test_walk.py). Measured on the walking dress (4374 vertices, 2 s): waiting for
-the server had cost 5.8-10.7 ms a frame -- 8 % of its prefetches were not even begun by the
-next check, the server's thread descheduled by this shared machine -- and the first query
-after each frame switch (every point asked again) 1.9 ms; the server now starts on a frame's
-maps at the switch, and answers ~70 % of the chunks. scripts/bench_ab.py --walk 4, four
-interleaved rounds: collision 15.8 instead of 21.3 ms a frame, 0.88 x the time a frame, the same
-frames bit for bit.
+which chunk (tests/test_walk.py). The server starts on a frame's maps at the frame switch.
 
 Rendered ahead (`ahead`): a helper thread with its own GL context (engine.collide.gl.thread_context)
 renders frame k + 1's maps as soon as frame k's come into use; set_time waits for them only if
@@ -63,10 +48,8 @@ hold their float arrays in float16 when `compact` is set (half the memory; the d
 sets: rendered ahead, the helper thread expands the next frame's, with its depth pairs, into
 the set not in use while the solver works on this frame; the switch only waits for it, or
 expands now after a jump). Both conversions are numba kernels (_compact_half, _expand_half),
-bit for bit what numpy's astype gives: measured on the walking dress's maps (1.4 million values
-a frame), numpy took 8 ms to compact and 13-14 ms to expand a frame -- 1.4 s of a 4 s walk's
-23 s -- the kernels 3 and 0.7 ms. `stats["map_seconds"]` counts the conversions with the
-renders.
+bit for bit what numpy's astype gives, several times faster. `stats["map_seconds"]` counts the
+conversions with the renders.
 """
 
 from __future__ import annotations
@@ -91,9 +74,6 @@ from engine.jit import njit, serial_kernel
 
 REACH = 0.002  # m: a point that moved this far (in the root's frame) since its answer asks again
 MAX_AGE = 0.002  # s: ... and so does an answer this old
-# (4 ms measured 2026-12-04, scripts/bench_ab.py --walk 4, three interleaved rounds on the
-# dress: 0.98 x the time a frame -- within the rounds' spread -- and penetration max 1.96
-# instead of 1.71 mm: left at 2)
 SLACK = 0.0005  # m: a clear point may come this close to the band before it asks again
 NEAR = 0.001  # m: a point this close outside the (widened) band is answered with the surface, and carried
 MIN_NZ = 0.2  # a carried penetration changes at most 1 / MIN_NZ x the normal motion
@@ -128,7 +108,7 @@ def _query_cached(pts, off, lo, hi, t, frame, tol, widened, shift_t, root_v, vma
         fresh = c_frame[p] == frame and moved < reach and age < max_age
         if fresh and c_surf[p] != 0:
             # the maps' penetration is measured along z: it changes by the normal motion / |n_z|
-            # (capped); a side-layer answer (n_z = 0) is a distance (as cloth.kernels._depth_rate)
+            # (capped); a side-layer answer (n_z = 0) is a distance (as cloth.kernels_carry._depth_rate)
             nz = abs(normal[p, 2])
             rate = 1.0 if nz == 0.0 else 1.0 / max(nz, MIN_NZ)
             pen = c_pen[p] + (c_un[p] * age - (dx * normal[p, 0] + dy * normal[p, 1] + dz * normal[p, 2])) * rate
@@ -158,7 +138,7 @@ def _query_cached(pts, off, lo, hi, t, frame, tol, widened, shift_t, root_v, vma
 @njit(fastmath=True, cache=True, inline="always")
 def _face_point(pts, p, n_vertices, quads, tris):
     """Row p of pts (p >= n_vertices): its face's point from the vertex rows -- a quad's midpoint
-    (quads first), else a triangle's centroid; as engine.cloth.kernels.collision_points makes it,
+    (quads first), else a triangle's centroid; as engine.cloth.kernels_contact.collision_points makes it,
     bit for bit."""
     f = p - n_vertices
     if f < quads.shape[0]:
@@ -217,8 +197,7 @@ register_job(TrackJob, _work)
 def _expand_half(bits, table, out):
     """out[i] = table[bits[i]]: float16 values (as their uint16 bits) to float32 through the
     65,536-entry table of every half's value (_HALF_TABLE) -- exact, as numpy's astype, which
-    converts each element in software: measured on the 1.4 million values of one walking
-    frame's maps, 0.7 ms against numpy's 12.8-14 ms."""
+    converts each element in software."""
     for i in range(bits.shape[0]):
         out[i] = table[bits[i]]
 
@@ -231,7 +210,7 @@ def _compact_half(bits, out):
     """out[i] = the float16 bits of the float32 whose bits are bits[i] (uint32), rounded to
     nearest, ties to even; overflow to infinity, NaN stays NaN, underflow to subnormals and
     zero -- IEEE 754's conversion, as numpy's astype does it (tests/test_walk.py checks them
-    equal): measured on one walking frame's maps, 3 ms against numpy's 8 ms."""
+    equal)."""
     for i in range(bits.shape[0]):
         f = bits[i]
         sgn = np.uint16((f & 0x80000000) >> 16)
@@ -379,9 +358,7 @@ class TrackCollider(Collider):
         (float16 when compact) -- a periodic walk's ramp and one cycle -- so that the walk
         itself only expands kept copies (`keep` must be set). Rendered ahead, in the helper
         thread (its GL context), else in this one; progress(done, total) after each. Returns
-        the seconds it took. (Measured on default:female's walk, 49 frames: 1.08 s rendered
-        alone, where rendering one frame ahead took 1.54 s of the helper thread's time and
-        slowed the walk's frames while it ran: 50-62 ms a frame against 35-51 ms after.)"""
+        the seconds it took."""
         if not self.keep:
             raise ValueError("prerender: maps that are not kept would be rendered again")
         t0 = time.perf_counter()
@@ -503,13 +480,11 @@ class TrackCollider(Collider):
     def fill_faces(self, n_vertices: int, quads: np.ndarray, tris: np.ndarray) -> None:
         """From now on the rows of the points asked (query, prefetch) from n_vertices on are the
         faces' points -- each quad's midpoint, then each triangle's centroid, of the vertex rows
-        (engine.cloth.kernels.collision_points) -- and this collider makes them: the caller
+        (engine.cloth.kernels_contact.collision_points) -- and this collider makes them: the caller
         writes the vertex rows only. Each query's chunk makes its own face points (_face_point),
         so on the query server's thread for the chunks it answers, instead of on the solver's
         before every query (the solver asks for this: engine.cloth.solver). The same frames bit
-        for bit. Measured, scripts/bench_ab.py --walk 4 on the 3,883-vertex dress, three A/Bs
-        of six interleaved rounds: 0.91, 0.99 and 1.01 x the time a frame (median 0.98 over the
-        18 rounds, faster in 11) -- within the machine's spread."""
+        for bit."""
         self._stop_server()
         self._n_vertices = np.int64(n_vertices)
         self._quads = np.ascontiguousarray(quads, dtype=np.int32)

@@ -171,19 +171,12 @@ CPU_WINDOWS = 3
 class StallWatch:
     """Whether a collider's helper thread still pays: a wait for the chunks it holds longer than
     STALL means it was not running -- the machine's cores are busy with other work (other
-    try-ons), and a helper then makes the solver wait for a core instead of saving it time
-    (measured: two drapes at once on the two cores with spinning helpers, 0.65-0.76 ms an
-    iteration against 0.31-0.34 without). When STALL_SHARE of the last STALL_WINDOW shared
-    requests stalled, `lost` turns True and the collider answers alone from then on (the same
-    answers). A burst is not enough: while a walk renders its first cycle of maps in a third
-    thread, the query server stalls now and then (measured: let go after 3 stalls in the first
-    0.05-0.2 s of 2 of 3 walks, each then 0.60 realtime instead of 0.69).
-    Nor do stalls show every kind of crowding: two walks at once, each with its spinning helper,
-    stalled seldom but ran at 0.22-0.23 realtime where they ran at 0.44 without helpers -- each
-    solver's thread got 0.36-0.55 of a core (time.thread_time over wall time, 0.25 s windows)
-    against 0.63-0.99 for a walk alone (the lower ones while its maps are rendered). So the
-    helper is also let go when the solver's thread got less than CPU_SHARE of a core in
-    CPU_WINDOWS windows in a row."""
+    try-ons), and a helper then makes the solver wait for a core instead of saving it time.
+    When STALL_SHARE of the last STALL_WINDOW shared requests stalled (a burst is not enough:
+    a walk rendering its maps in a third thread stalls now and then), `lost` turns True and the
+    collider answers alone from then on (the same answers). Stalls do not show every kind of
+    crowding (two walks at once stall seldom), so the helper is also let go when the solver's
+    thread got less than CPU_SHARE of a core in CPU_WINDOWS windows in a row."""
 
     def __init__(self):
         self.requests = self.stalls = 0

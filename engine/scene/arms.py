@@ -1,9 +1,7 @@
 """Dress a body whose arms hang close to its torso: with the arms raised, then lowered.
 
 A top sewn on such a body fails: the seams beside the arms cannot close with an arm in the way
-(engine.scene.garments.arms_in_the_way; measured: default:female as a scan with its arms
-lowered 30 degrees, 2.4 cm from the torso, its dress stayed 2.1 cm open, its sleeveless shirt
-8 cm, its shirt 9.4 cm). Then (`lift_arms`, `lower_arms`):
+(engine.scene.garments.arms_in_the_way). Then (`lift_arms`, `lower_arms`):
 
 1. The body gets the default body's skeleton fitted (engine.body.fit) and its upper arms are
    turned out about the shoulders, LIFT_STEP degrees at a time up to LIFT_MAX, until they hang
@@ -15,13 +13,6 @@ lowered 30 degrees, 2.4 cm from the torso, its dress stayed 2.1 cm open, its sle
 4. On the body as loaded, the cloth relaxes without friction for RELAX_TIME and then drapes as
    usual until it settles (engine.scene.drape.drape).
 
-Measured on that scan (M, cotton; one run each, /tmp experiments of 2026-12-01):
-- with friction while lowering: the dress ended at 11.9 % strain (cloth dragged down under the
-  arms, pressed between arm and torso);
-- without it, then settled as usual: dress 6.5 %, sleeveless shirt 12.6 %, shirt 5.9 % (settled);
-- without friction for the whole settle: sleeveless shirt 5.9 %, but still sliding after 6 s;
-- without it for RELAX_TIME, then as usual (kept): dress 6.6 % (settled), sleeveless shirt 5.9 %
-  (not settled in 6 s).
 A drape unsettled or tight after this says so in the report's warnings, as any drape.
 """
 

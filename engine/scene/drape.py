@@ -67,7 +67,7 @@ class DrapeResult:
     dt: float
     strain_guard: float | None = None  # the drape's guard (threshold + this), None: off
     guard_share: float = 0.0  # share of the last settle window's steps in which the guard acted
-    snapped: int = 0  # seam pairs welded by the stall rule (DrapeOptions.snap_gap)
+    snapped: int = 0  # seam pairs welded by the stall rule (SewTuning.snap_gap)
     spec: object = None  # the PatternSpec dressed (set by engine.scene.tryon.run_tryon)
     lowering: dict | None = None  # dressed with the arms raised: the lowering's figures (engine.scene.arms)
     collide_every: dict = field(default_factory=dict)  # steps between collision checks by stage

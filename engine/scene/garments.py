@@ -106,13 +106,12 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
     (kw: `lift`, passed on to engine.scene.tryon.run_tryon).
     With --size auto on a catalogue garment, the size recommended from the body's girths comes
     first; if it comes out too small -- its drape refused it (seams that cannot close, cloth
-    stretched past DrapeOptions.too_tight) or ended tight (report["tight"]) -- the next larger
-    size is dressed, up to AUTO_TRIES more (measured: the sample scan's fuller bust leaves its
-    L dress at 11-22 % strain, its XL dress at 5.9 %); if it comes out too large (slid down the
-    body), the next smaller (_dress_auto). The report's `sizes_tried` lists the sizes that did
-    not fit and why; `note(size, why, next size)` is called before each retry. When no size
-    fits, the closest result is returned with a warning naming each size tried and why, or the
-    last refusal raised. Other sizes and pattern files are dressed
+    stretched past DrapeTuning.too_tight) or ended tight (report["tight"]) -- the next larger
+    size is dressed, up to AUTO_TRIES more (a chart does not know a fuller bust); if it comes out
+    too large (slid down the body), the next smaller (_dress_auto). The report's `sizes_tried`
+    lists the sizes that did not fit and why; `note(size, why, next size)` is called before each
+    retry. When no size fits, the closest result is returned with a warning naming each size
+    tried and why, or the last refusal raised. Other sizes and pattern files are dressed
     once; a too-small error then names the size auto would pick (add_size_hint). Seams beside
     the arms that cannot close on a body whose arms hang close to its torso, or cloth beside
     them left too stretched (arms_in_the_way, beside_the_arms): the same size is dressed again

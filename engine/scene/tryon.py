@@ -38,8 +38,7 @@ def plan_maps(body: Body, garment: Garment, texel: float, collision: str) -> Try
     it does not need). The same maps serve sewing and draping: a top without sleeves sewn
     without the arm maps (its shoulder seams then close through the arm's root) left cloth inside
     the arm, whose front and back maps pushed neighbouring vertices out on opposite sides when
-    the drape brought the arms back (measured on default:female's dress: springs torn to 225 %
-    strain, and with the strain guard the dress blew up into a heap on one shoulder)."""
+    the drape brought the arms back."""
     left: list[str] = ["velocity maps, because the body does not move"]
     top = float(garment.positions[:, 1].max())
     window = (0.0, min(body.vertices[:, 1].max(), top + 0.15))
@@ -223,9 +222,7 @@ def _slid(body: Body, res: DrapeResult, shift: dict, placement_note: str | None)
 
 def _carried_hint(err: Exception, placement_note: str | None, slid: bool = False) -> None:
     """A GarmentCode pattern carried onto another body by its landmarks (pattern_placement) whose
-    seams did not close, or that slid down the body: say that the placement may be why
-    (measured: GarmentCode's own T-shirt sews on its mean body, and on default:female and
-    default:male it falls from the shoulders before its 5 cm shoulder seams close)."""
+    seams did not close, or that slid down the body: say that the placement may be why."""
     from engine.garment.place import CARRIED, CARRIED_HINT
 
     if placement_note == CARRIED and (slid or getattr(err, "open_top", None) is not None):
@@ -233,17 +230,8 @@ def _carried_hint(err: Exception, placement_note: str | None, slid: bool = False
 
 
 # x the fabric's friction while sewing on a body whose arms hang closer to its torso than
-# ARM_GAP_OK. Without friction the panels slide over the body into place, but there the straps
-# slid off the shoulders -- down the arm, which no longer falls away at 45 degrees -- and the
-# dress fell to the hips. Measured with friction (--size auto; before the armholes followed
-# thick arms): default:female as a scan with its arms lowered 10 degrees (8.7 cm) and 20
-# degrees (5.4 cm): the dress sewed (without friction it failed, 15 cm open; at 20 degrees it
-# ends 6 % stretched in M with 2 pairs snapped at 1.6 cm), as did the sleeveless shirt and the
-# shirt (they sew without friction too: strain 5.4-6.6 % with it, 5.6-6.1 % without); at 30
-# degrees (2.4 cm) the dress and the sleeveless shirt stayed 2.3-3.3 cm open. The sample scan
-# lowered 10 degrees (7.2 cm): the shirts sewed, the dress stayed 1.9 cm open; at 20 and 30
-# degrees 2-10 cm. Friction for every body is worse: the sample scan's dress (11.2 cm) came
-# out 19 % stretched
+# ARM_GAP_OK: without it the straps slide off the shoulders down the arm, which no longer falls
+# away at 45 degrees (not on every body: friction for all is worse)
 ARMS_CLOSE_SEW_FRICTION = 1.0
 
 
@@ -263,10 +251,7 @@ def sewing_friction(body: Body) -> tuple[float, str | None]:
 
 
 TOP_DROP = 0.10  # m: a garment whose top ends this far below where it was placed slid down the body
-# m: ... and this far, it came off it: an error, not a result. Measured: drapes that hang on the
-# body end -5.5 .. +3.6 cm from where they were placed (the slow drape suite); the sample
-# GarmentCode skirt sewn at 1 m/s instead of 3 slid down the legs and settled on the feet, 101
-# cm down, with every bar met (strain 5.9 %, no penetration, settled)
+# m: ... and this far, it came off it: an error, not a result (it may meet every other bar)
 SLID_OFF = 0.25
 HEM_RISE = 0.15  # m: ... whose lowest point ends this far above its placed height bunched up
 TIGHT = 0.01  # a drape stretched past the fabric's threshold by more than this is reported tight
@@ -275,7 +260,7 @@ TIGHT = 0.01  # a drape stretched past the fabric's threshold by more than this 
 
 def fit_warnings(strain: float, fabric, settled: bool, budget: float, pattern_file: bool = False) -> list[str]:
     """Warnings about a drape that ended but does not fit well: stretched past the fabric's
-    limit by more than TIGHT (past DrapeOptions.too_tight it is refused instead), or not
+    limit by more than TIGHT (past DrapeTuning.too_tight it is refused instead), or not
     settled within the budget (s of simulated time). A pattern file has one size: the advice
     is to grade it larger, not to pick a larger size."""
     out = []
@@ -291,20 +276,15 @@ def fit_warnings(strain: float, fabric, settled: bool, budget: float, pattern_fi
 
 def hang_shift(placed: np.ndarray, draped: np.ndarray) -> dict[str, float]:
     """How far (m, up positive) the garment's highest and lowest points moved in height from the
-    placement to the drape. A garment hanging on the body moves a few centimetres (measured on
-    the slow drape suite: top -5.5 .. +3.6 cm, hem -6.7 .. +7.7 cm); one that slid off or
-    collapsed moves far more (a dress blown into a heap on one shoulder: hem +60 cm)."""
+    placement to the drape. A garment hanging on the body moves a few centimetres; one that slid
+    off or collapsed moves far more."""
     return {"top": float(draped[:, 1].max() - placed[:, 1].max()),
             "hem": float(draped[:, 1].min() - placed[:, 1].min())}
 
 
 def sharp_folds(positions: np.ndarray, triangles: np.ndarray, degrees: float = 150.0) -> dict:
     """Edges where the cloth folds back on itself: the normals of the two faces sharing an edge
-    more than `degrees` apart. Measured at 1.5 cm, M on both default bodies: the catalogue's
-    skirts 0, sleeveless shirts 2-12, dresses 1-14, shirts 21-23 (sleeves, armholes), trousers 0
-    (97-165 when they started stretched round the feet and crumpled); the sample skirt hanging
-    0-29, crumpled at the hem with its waistband askew 74-88 (sewn at 20 x damping, 2 of 4 runs).
-    Compare like garments."""
+    more than `degrees` apart. Compare like garments (docs/tuning.md has typical counts)."""
     import trimesh
 
     angles = trimesh.Trimesh(np.asarray(positions, dtype=np.float64), np.asarray(triangles), process=False,
