@@ -159,16 +159,15 @@ def _fit(scan: Body, ms, preset: str, notes: list[str]) -> Body:
                 rig=new_rig, notes=notes, to_world=scan.to_world)
 
 
-FIT_MEDIAN_MAX = 0.04  # m: a fit whose median distance to the scan is larger is refused (measured: the
-# sample scan 11 mm, the SMPL woman 17-19 mm, the default bodies in any pose 0-4 mm; a 1.7 m pillar 111 mm)
+FIT_MEDIAN_MAX = 0.04  # m: a fit whose median distance to the scan is larger is refused (not a person)
 SMOOTH_ARM_FROM = 0.12  # m from the shoulder joint: arm vertices further out are smoothed too
 
 
 def _arm_below_shoulder(scan: Body, tmpl: Body, near: np.ndarray, joints: np.ndarray) -> np.ndarray:
     """(N,) bool: scan vertices labelled arm (from the template vertex `near` each) further than
     SMOOTH_ARM_FROM from their side's shoulder joint (upperarm01 in the mapped `joints`): the
-    weights transferred there jumped between the upper arm's joints and folded the skin when
-    the arms swung (the sample scan, 95 folds in a 2 s walk, mid upper arm and elbow)."""
+    weights transferred there jump between the upper arm's joints and fold the skin when the
+    arms swing."""
     from engine.body.types import SEGMENT_ID
 
     names = tmpl.rig.joint_names
@@ -208,7 +207,7 @@ def closest_build(scan: Body, ms, preset: str) -> dict[str, float]:
         return costs[(w, u)]
 
     w, u = 0.5, 0.5
-    for _ in range(2):  # one control after the other (13 of the 25 bodies), twice
+    for _ in range(2):  # one control after the other, twice
         w = min(BUILD_GRID, key=lambda x: cost(x, u))
         u = min(BUILD_GRID, key=lambda x: cost(w, x))
     return {"weight": w, "muscle": u}
@@ -243,11 +242,9 @@ def fit_arms(tmpl: Body, mt, scan: Body, ms, c_s: np.ndarray) -> dict[str, np.nd
     the upper arm and forearm back -- alone, the upper arm went back to make up for the default
     body's forearm reaching forward, the elbow bent back --, then the forearm out and back),
     whichever brings the mapped template closest to the scan on that side (_arm_cost), then each
-    angle refined to 2 degrees. Scans come in any pose from arms down
-    (hands on the thighs) to a T-pose, in the frontal plane or reaching forward (the default
-    body's, 20 degrees); the axis of the scan's surface beside the torso, which the arms took
-    before, is not there on a scan with its arms down, and one angle at a time went astray
-    (an arm reaching forward too far is closer to the scan hanging down inside the torso)."""
+    angle refined to 1 degree. Scans come in any pose from arms down (hands on the thighs) to a
+    T-pose, in the frontal plane or reaching forward (as the default body's do); with the arms
+    down there is no surface beside the torso to take an arm's axis from."""
     from scipy.spatial import cKDTree
 
     arm = _arm_share(tmpl.rig)
@@ -304,9 +301,8 @@ def _arm_deltas(turns: dict) -> dict[str, np.ndarray]:
 
 def _arm_share(rig: Rig) -> dict[str, np.ndarray]:
     """side -> indices of the template vertices weighted mostly (> 0.5) to that arm's joints
-    (the shoulder's descendants) but not to its fingers: the fingers' many vertices made the
-    search fit the hand and leave the elbow anywhere along the arm (the sample scan's left
-    upper arm turned 28 degrees back, its forearm forward)."""
+    (the shoulder's descendants) but not to its fingers: the fingers' many vertices would have
+    the search fit the hand and leave the elbow anywhere along the arm."""
     parents = rig.parents
     finger = np.array([n.startswith(("finger", "metacarpal")) for n in rig.joint_names])
     out = {}
@@ -347,20 +343,10 @@ def smooth_weights(vertices: np.ndarray, faces: np.ndarray, indices: np.ndarray,
     cotangents taken as 0 (so every smoothed weight stays a convex mix of the given ones) and D
     the vertices to smooth (`where`; None: all -- the others keep their weights and hold their
     neighbours' as a boundary does), solved for every joint at once with a sparse LU. Then each
-    vertex keeps its K largest weights (those above SMOOTH_DROP), renormalised.
-    Measured on the sample scan (23,752 vertices, 0.2 s), skin edges folded past 90 degrees
-    while walking (faces within 45 degrees of each other at rest; every 2nd frame of 2 s):
-    1,220 as transferred (75 in the worst frame: knees, groin, elbows, armpits); smoothed
-    everywhere 16 (at 2 cm 85, at 5 cm none), below the waist (fit_rig) 69, 53 of them at the
-    armpits. Smoothed everywhere, the shoulders' weights spread down the torso's sides as well:
-    with its arms lowered 30 degrees the scan measured 1.6 cm less round the bust (0.8 as
-    transferred) and the dress on default:female saved as a scan with its arms lowered was
-    left 7.3 % stretched between arm and torso (6.6-6.8 %): fit_rig keeps the transferred
-    weights at the shoulders and the torso above the waist, and smooths the arms further out
-    and below the waist, over 5 cm (4 cm left 34 folds below the waist with the heavier
-    template closest_build picks for the sample scan, 5 cm 2; 56 in all). default:female with
-    its own weights has 61 (knees, feet).
-    A 380,000-vertex mesh takes ~8 s and 1.7 GB."""
+    vertex keeps its K largest weights (those above SMOOTH_DROP), renormalised. fit_rig smooths
+    below the waist and along the arms, not the shoulders and the torso above the waist (there
+    the shoulders' weights spread down the torso's sides). A 380,000-vertex mesh takes ~8 s and
+    1.7 GB (docs/tuning.md: the folds measured)."""
     import scipy.sparse as sp
     from scipy.sparse.linalg import splu
 

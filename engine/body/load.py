@@ -34,7 +34,7 @@ AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": 
 UNITS = ((1.0, "metres"), (0.1, "decimetres"), (0.01, "centimetres"), (0.001, "millimetres"), (0.0254, "inches"))
 HUMAN_HEIGHT = (0.5, 2.5)  # m; the metric scales give non-overlapping raw ranges ...
 ADULT_HEIGHT = (1.3, 2.3)  # m: ... inches overlap centimetres (70 units: 1.78 m or 0.70 m): the adult
-# wins, and inches are taken for adults only
+# reading wins, and inches are taken for adults only
 DEFAULT_MAX_TRIANGLES = 2_000_000
 TINY_PIECE = 0.01  # drop components under this fraction of the total surface area
 
@@ -251,8 +251,7 @@ def _faired(v0: np.ndarray, v: np.ndarray, f: np.ndarray) -> np.ndarray:
     """The vertices MeshFix added (those not among the scan's own, v0) moved to where the
     surface bends on smoothly from the scan round them: bi-Laplacian (thin-plate) fairing with
     the scan's vertices fixed, L^2 x = 0 on the new ones (uniform weights). MeshFix's patches are
-    flat: a crown cut 2.5 cm below the top came back 1.6-1.9 cm lower (default bodies), a sole's
-    patch flat where the sole is arched."""
+    flat, and a flat crown takes centimetres off the height."""
     import scipy.sparse as sp
     from scipy.sparse.linalg import spsolve
 

@@ -234,9 +234,7 @@ class Measurements:
 STEP = 0.005  # m between profile cuts; landmarks are then refined by bisection
 ARMPIT_CUTS = 3  # the armpits: where the torso cut widens by a quarter within this many cuts up
 # ... and below that, cuts still narrowing faster than this (m of width per m of height) going
-# down are the fold of skin between a raised arm and the torso, not yet the torso: in a T-pose
-# the cut 2 cm under the widening still reached 30 cm along the arms (default:male, chest 174 cm),
-# while a torso widens towards the armpits at most ~1.4 (default:male: 7 mm a 5 mm cut)
+# down are the fold of skin under a raised arm, not yet the torso (a torso widens more slowly)
 FOLD_NARROWING = 1.6
 ARM_GAP_BELOW = 0.10  # m below the armpits where Measurements.arm_gap is taken
 ARM_ROOT_BELOW = 0.03  # m below the armpits where Measurements.arm_root is taken
@@ -374,9 +372,7 @@ def _measure(body) -> Measurements:
 
 
 # Where a landmark is not found, its height is estimated from the stature (and the armpits), so that
-# what needs it (a garment's placement) can go on; the notes say which. Measured: crotch 0.46-0.48
-# x height (default bodies, the sample scan; GarmentCode's SMPL body 0.43), armpits 0.75-0.76,
-# shoulders 0.07-0.08 above the armpits
+# what needs it (a garment's placement) can go on; the notes say which
 PROPORTIONS = {"crotch": 0.46, "armpit": 0.755, "shoulder_over_armpit": 0.075}
 
 
@@ -481,9 +477,7 @@ def _arm_root(prof: _Profile, y: float) -> float:
 
 def _torso_girths(prof: _Profile, h: float, crotch: float, armpit: float, m: Measurements) -> None:
     # Bust point: a forward peak of the torso's front profile in the chest region (_front_peak),
-    # not the region's lower edge, nor a belly standing further forward (default:male at weight
-    # 1: the "bust point" was the belly, at the waist, and the bust, underbust and every size
-    # chosen from them came out n/a)
+    # not the region's lower edge, nor a belly standing further forward
     idx = prof.index_range(armpit - 0.12 * h, armpit - 0.01 * h)
     front = np.array([prof.central[i].points[:, 1].max() if prof.central[i] is not None else -np.inf
                       for i in idx])
@@ -525,8 +519,7 @@ def _torso_girths(prof: _Profile, h: float, crotch: float, armpit: float, m: Mea
     # Hips: largest girth between the crotch and the waist; a little below the crotch the
     # tape goes around both legs (hull of the two leg pieces). The hip height is that of the
     # largest girth above the crotch (the seat): on men the thighs' hull under the crotch can be
-    # the largest (default:male: 101.9 cm 5 cm under it, the seat 99.1 cm 4 cm above), and a hip
-    # line under the crotch put the landmarks out of order for everything mapped by them
+    # the largest, and a hip line under the crotch puts the landmarks out of order
     best, best_y, seat, seat_y = -np.inf, np.nan, -np.inf, np.nan
     for i in prof.index_range(crotch - 0.03 * h, m.waist_height):
         if prof.ys[i] >= crotch:
@@ -547,7 +540,6 @@ PEAK_BELOW = 0.04  # x height: ... and PEAK_RISE further forward than every cut 
 PEAK_RISE = 0.003  # m
 CHEST_UPPER = 0.06  # x height under the armpits: where a flat chest's front is looked for
 WAIST_SHARE = 0.58  # the waist's place between crotch and armpits where there is no narrowest girth
-# (measured: default:female 0.60, the sample scan 0.64, default:male 0.53)
 
 
 def _front_peak(front: np.ndarray, below: int, upper: int) -> int:
@@ -555,7 +547,7 @@ def _front_peak(front: np.ndarray, below: int, upper: int) -> int:
     as far forward as its BUST_PEAK_CUTS neighbours on each side, away from both ends, that
     stands PEAK_RISE forward of every cut up to `below` cuts under it (the chest, not a belly
     further down); without one, the most forward of the top `upper` cuts (a flat chest over a
-    belly: default:male at weight 1 and muscle 0 had its "bust" round the belly, 131 cm)."""
+    belly)."""
     k = BUST_PEAK_CUTS
     for j in range(len(front) - k - 1, k - 1, -1):
         if front[j] >= front[j - k:j + k + 1].max() and front[j] - front[max(0, j - below):j].min() >= PEAK_RISE:
@@ -596,8 +588,7 @@ def _shoulders(v: np.ndarray, f: np.ndarray, prof: _Profile, h: float, armpit: f
     """Acromion points, a heuristic: laterally at the side walls of the torso just below the
     armpits (the torso wall runs up to the acromion; the bend of the shoulder-arm top profile
     sits on the deltoid, a few cm further out), vertically the top of the body's surface there
-    (a cut by the plane x = wall: the vertices within 5 mm of it, which this took before, were
-    none on a coarse mesh -- 10,000 triangles -- and 2-4 cm below the top on others)."""
+    (a cut by the plane x = wall, whatever the mesh's density)."""
     core = prof.central_piece(prof.cut(armpit - 0.005))
     if core is None:
         m.notes.append("shoulder points not found: no torso cut under the armpits")

@@ -72,10 +72,8 @@ TOE_OFF, TOE_EASE = 0.64, 0.08  # gait phase of toe-off, and how long the toes t
 PELVIS_SMOOTH = 0.03  # the pelvis's path: the planted one smoothed over this x the cycle (Gaussian sigma; _pelvis_path)
 PACE_EVEN = 0.5  # how far the gait's clock is retimed toward an even pace (0: not, 1: constant speed)
 ARM_IN = 6.0  # degrees the arms hang closer to the body while walking than in the rest (A-) pose ...
-ARM_WALK_MIN = 24.0  # ... but no closer than this from the vertical (in the frontal plane): a scan
-# whose arms hang down (its hands turned off its thighs, engine.scene.arms.clear_hands, 2 cm from
-# the hips) swung its hands into the trousers on the hips and they came apart (56 % at frame 11);
-# such arms are turned out to this angle as the walk starts
+ARM_WALK_MIN = 24.0  # ... but no closer than this from the vertical (in the frontal plane): arms
+# hanging down (a scan's) are turned out to it as the walk starts, so the hands swing clear of the hips
 
 
 @dataclass

@@ -11,11 +11,8 @@ Three cues, from the mesh alone and independent of its units, pose and density:
 - the underbust-to-hip girth ratio (a woman's ribcage is narrow for her hips; the underbust
   where there is none stands for it in the waist-hip ratio's place).
 score = BREAST x breasts - WAIST_HIP x (waist/hips - 0.8) - RIBS_HIP x (underbust/hips - 0.8)
-+ OFFSET; female above 0. The weights are a logistic regression's on the default bodies
-(ANNY: both sexes; weight and muscle 0, 0.5 and 1; 1.55, 1.95 m and the presets' stature; 30
-and 70 years; arms as built and down to the thighs; 136 bodies), rounded. It separates them but
-for ANNY's heavy women without muscle (waist-hip 0.82, underbust-hip 0.82, flat chested), which
-read male: their shape is a man's by all three cues. The two female scans score 2.5 and 2.0.
++ OFFSET; female above 0. The weights are a logistic regression's on the default bodies, rounded
+(docs/tuning.md: what they separate and what not).
 """
 
 from __future__ import annotations

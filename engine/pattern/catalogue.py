@@ -171,10 +171,8 @@ class Fit:
 def waistband_girth(f: Fit) -> float:
     """The waist girth (cm, before ease) of a skirt's or trousers' waistband: the size's, or the
     body's where that is smaller -- a waistband that holds at the waist, as a real one does by
-    its tension (taken in, elastic, or belted). A size chosen by the hips hung loose at a
-    slimmer waist and slid down the body to where it is as wide: default:male,weight=1 in L
-    (chart waist 92, body 90.3 cm) 10 cm down, stretched 15-26 % across the waistband on the
-    hips as the walk started; the issue's trousers on a man 11 cm."""
+    its tension (taken in, elastic, or belted). A size chosen by the hips would hang loose at a
+    slimmer waist and slide down the body to where it is as wide."""
     return min(f.waist, f.body_waist) if f.body_waist is not None and np.isfinite(f.body_waist) else f.waist
 
 

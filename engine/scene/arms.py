@@ -179,9 +179,8 @@ def lower_arms(lift: ArmLift, res: DrapeResult, request: TryOnOptions, tuning: T
 
 
 HAND_NEAR = 0.012  # m: hands closer than this to the hips or thighs (measure's hand_gap) ...
-HAND_CLEAR = 0.02  # m: ... are moved out until this far, turning the arms about the shoulders (the
-# default bodies' A-pose hands hang 2.3-3.9 cm from the hips; default:male with its arms down to
-# the thighs, 0.7 cm, came to 2.3 cm at 8 degrees and no further: the hand nears the hip's flare)
+HAND_CLEAR = 0.02  # m: ... are moved out until this far, turning the arms about the shoulders (as far
+# as the default bodies' A-pose hands hang from the hips: further out a hand nears the hip's flare)
 HAND_STEP = 2.0  # degrees a step
 HAND_MAX = 30.0  # degrees at most
 
@@ -191,8 +190,8 @@ def clear_hands(body: Body) -> Body:
     or thighs (a scan with its arms down) -- with the arms turned out about the shoulders
     (the default skeleton fitted to it) until the hands hang HAND_CLEAR away, rigged in that
     pose and saying so in its notes. There is no room for cloth between a hand and a thigh that
-    touch: trousers placed round the legs took the hands in and came out stretched 220 %, and a
-    walk swings the hands into the thighs. Returns the body unchanged when it cannot be fitted."""
+    touch: trousers placed round the legs take the hands in, and a walk swings the hands into
+    the thighs. Returns the body unchanged when it cannot be fitted."""
     from engine.body.measure import measure
     from engine.body.motion import _rot, pose_joints
     from engine.body.types import Rig

@@ -76,9 +76,7 @@ class WalkTuning:
 
     stiffen_at: float | None = 0.10  # a frame past the fabric's threshold + this doubles the springs (None: never)
     # ... over at least this many springs (or twice as far past it at one): one spring at a seam's
-    # end past it (the trousers' waistband at the side seam, default:female and default:male, 16-23 %,
-    # the next most stretched under 11 %) doubled every spring for the rest of the walk, and stiffer
-    # springs take a shorter eq. 4 step
+    # end is no reason to stiffen every spring for the rest of the walk (a shorter eq. 4 step)
     stiffen_springs: int = 8
     damping_cap: float = 0.5  # a spring's damping is at most this x m / (dt degree)
     check_travel: float = 0.00175  # m: collisions are checked as often as the body's bulk travels this far ...
