@@ -108,7 +108,7 @@ def run_cell(body, walker, garment: str, seconds: float) -> tuple[dict, object]:
     request = TryOnRequest.of(garment=garment, size="auto", motion="walk", seconds=seconds)
     try:
         res, report = dress_request(body, request)
-        cell.update(size=report["garment"], sizes_tried=report.get("sizes_tried", []),
+        cell.update(size=report["garment"], cloth_vertices=report["cloth_vertices"], sizes_tried=report.get("sizes_tried", []),
                     warnings=list(report["warnings"]), drape_pen_mm=report["penetration_mm"]["max"],
                     drape_strain=report["strain"]["max"], dress_s=report["wall_seconds"]["total"])
         w = walk_cloth(walker, res, request)
@@ -132,7 +132,8 @@ def cell_line(body: str, c: dict) -> str:
     else:
         head = (f"{'clean' if c['clean'] else 'warn':5s} {_size(c):28s} pen {c['drape_pen_mm']:4.1f}/"
                 f"{c['walk_pen_mm']:4.1f} mm  strain {100 * c['drape_strain']:4.1f}/{100 * c['walk_strain']:4.1f} %"
-                f"  rt {c['realtime']:.2f}" + (f"  stiffened {c['stiffened']}" if c["stiffened"] else ""))
+                f"  rt {c['realtime']:.2f} ({c['cloth_vertices']} v)"
+                + (f"  stiffened {c['stiffened']}" if c["stiffened"] else ""))
     warn = "; ".join(c.get("warnings", []))
     return f"{body:34s} {c['garment']:16s} {head}" + (f"  [{warn}]" if warn else "")
 
