@@ -538,7 +538,7 @@ def test_stiffening_looks_at_a_region_not_at_one_spring(walked):
     """spread_strain: the n-th most stretched spring. One vertex pulled out stretches the few
     springs round it (a seam's end: the trousers' waistband at the side seam reached 16-23 % at
     one spring, the next most stretched under 11 %, and stiffened every walk of them); the walk
-    stiffens when WalkTuning.stiffen_springs springs pass the bar (or one passes it twice over)."""
+    stiffens when WalkTuning.stiffen_springs springs pass the bar (or one passes it three times over)."""
     from engine.scene.walk import spread_strain
 
     _, res, _, _ = walked

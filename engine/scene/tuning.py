@@ -75,7 +75,7 @@ class WalkTuning:
     """Walking: the dressed body walks, the cloth follows."""
 
     stiffen_at: float | None = 0.10  # a frame past the fabric's threshold + this doubles the springs (None: never)
-    # ... over at least this many springs (or twice as far past it at one): one spring at a seam's
+    # ... over at least this many springs (or three times as far past it at one): one spring at a seam's
     # end is no reason to stiffen every spring for the rest of the walk (a shorter eq. 4 step)
     stiffen_springs: int = 8
     damping_cap: float = 0.5  # a spring's damping is at most this x m / (dt degree)

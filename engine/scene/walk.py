@@ -15,7 +15,7 @@ Softer springs while walking (TryOnOptions.walk_stiffness, default 0.25 x the dr
 shear springs): the eq. 4 step grows as 1 / sqrt of it, and the strain limit (velocity
 modification, the strain guard) holds the fit, as in seed 003 §4. Where it cannot -- a band the
 moving body wedges -- a frame whose strain passes the fabric's threshold + WalkTuning.stiffen_at
-over at least WalkTuning.stiffen_springs springs (spread_strain), or twice that past it at one,
+over at least WalkTuning.stiffen_springs springs (spread_strain), or three times that at one,
 doubles the stiffness (up to the drape's) for the rest of the walk and the report says so.
 
 A periodic walk's maps (the ramp and one cycle) are rendered before the walking stage
@@ -168,7 +168,7 @@ def walk_cloth(body: Body, drape: DrapeResult, request: TryOnOptions = TryOnOpti
             frames[i] = x
             # the strain limit is losing over a region, or badly at one spring: stiffer springs
             spread = spread_strain(model, x, t.stiffen_springs) if strain > stiffen_strain else 0.0
-            if (spread > stiffen_strain or strain > stiffen_strain + t.stiffen_at) and stiffness < 1.0:
+            if (spread > stiffen_strain or strain > stiffen_strain + 2 * t.stiffen_at) and stiffness < 1.0:
                 stiffness = min(1.0, 2.0 * stiffness)
                 model, sub, dt, every = walking_model(stiffness)
                 solver.restiffen(model, dt)
