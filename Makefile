@@ -6,7 +6,7 @@ OUT ?= out/demo
 
 PORT ?= 8000
 
-.PHONY: setup run demo test test-slow bench bench-peer clean clean-kernels
+.PHONY: setup run demo test test-unit test-slow fuzz fuzz-atheris bench bench-peer clean clean-kernels
 
 setup:
 	@bash scripts/setup.sh
@@ -28,8 +28,23 @@ PYTEST_ARGS ?= -n auto --maxprocesses 4
 test: setup
 	$(VENV)/python -m pytest -m "not slow" -q $(PYTEST_ARGS)
 
+# the unit tier: no dressing, walking, service or browser; one process, under a minute
+test-unit: setup
+	$(VENV)/python -m pytest -m "not slow and not integration" -q -n 0
+
 test-slow: setup
 	$(VENV)/python -m pytest -m slow -q $(PYTEST_ARGS)
+
+# The long fuzzing run: 10,000 malformed inputs per parser (tests/fuzz/run.py; failing inputs in out/fuzz/).
+FUZZ_INPUTS ?= 10000
+fuzz: setup
+	$(VENV)/python -m tests.fuzz.run --inputs $(FUZZ_INPUTS) --out out/fuzz
+
+# Coverage-guided (atheris), one parser: make fuzz-atheris TARGET=glb_anim SECONDS=600
+TARGET ?= obj
+SECONDS ?= 300
+fuzz-atheris: setup
+	mkdir -p out/fuzz && cd out/fuzz && PYTHONPATH=$(CURDIR) $(CURDIR)/$(VENV)/python -m tests.fuzz.atheris_run $(TARGET) -max_total_time=$(SECONDS)
 
 bench: setup
 	$(VENV)/tryon bench --out out/bench

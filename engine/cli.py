@@ -4,13 +4,13 @@ non-zero exit (2 for bad input, 3 for no OpenGL, 1 for an internal error)."""
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Optional
 
 import typer
 
 from engine.errors import GLUnavailableError, TryonError
+from engine.settings import EngineSettings, current, read, use
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Virtual try-on: bodies, collision maps, dressing (drape), walking (walk), evidence (bench).")
@@ -28,6 +28,15 @@ def _fail(msg: str, code: int) -> None:
     raise typer.Exit(code)
 
 
+@app.callback()
+def _read_settings() -> None:
+    # the TRYON_* settings (engine/settings.py), read once per command, before anything runs
+    try:
+        use(read(EngineSettings))
+    except TryonError as e:
+        _fail(str(e), 2)
+
+
 def _run(fn):
     """Run a command body; engine errors become a one-line message and an exit code."""
     try:
@@ -41,7 +50,7 @@ def _run(fn):
     except KeyboardInterrupt:
         _fail("interrupted", 130)
     except Exception as e:  # a bug: say so in one line; TRYON_DEBUG=1 shows the traceback
-        if os.environ.get("TRYON_DEBUG"):
+        if current().debug:
             raise
         _fail(f"internal error ({type(e).__name__}: {e}); rerun with TRYON_DEBUG=1 for details", 1)
 
@@ -343,34 +352,54 @@ app.add_typer(pattern_app, name="pattern")
 
 @pattern_app.command("import")
 def pattern_import_cmd(
-    dxf: Path = typer.Argument(..., help="A DXF of the pattern pieces (ASTM D6673 / AAMA: one block per piece, "
-                               "boundary on layer 1, turn points on layer 2; or closed polylines)."),
-    assembly: Optional[Path] = typer.Option(None, "--assembly", help="JSON with what a DXF does not hold: "
-                                            "stitches ({panel, edge} pairs, edge numbers as in the SVG), each "
-                                            "panel's translation (cm) and rotation (degrees), copies of pieces cut "
-                                            "twice (copy_of, mirror), the tryon block (fabric)."),
+    dxf: Path = typer.Argument(..., help="A DXF cutting pattern as pattern CAD exports it (ASTM D6673 / AAMA: a block "
+                               "per piece per graded size, the cut line on layer 1 in one or several parts; or "
+                               "closed outlines in a plain drawing)."),
+    size: Optional[str] = typer.Option(None, "--size", help="Which of the pattern's sizes (default: its sample size, "
+                                       "else its middle one)."),
+    assembly: Optional[Path] = typer.Option(None, "--assembly", help="An assembly file (JSON) to use instead of the "
+                                            "inferred seams: the assembly.json an import writes, corrected (panels "
+                                            "by piece and role; seams between spans of their outlines, corners "
+                                            "numbered as in pattern.svg), or GarmentCode's kind (stitches by "
+                                            "{panel, edge}, each panel's translation and rotation, copy_of)."),
     units: Optional[str] = typer.Option(None, "--units", help="mm, cm, m or in, when the DXF does not say."),
-    out: Path = typer.Option(Path("out/pattern"), "--out", help="Directory for pattern.json and pattern.svg."),
+    out: Path = typer.Option(Path("out/pattern"), "--out", help="Directory for pattern.json, pattern.svg and "
+                             "assembly.json."),
+    as_json: bool = typer.Option(False, "--json", help="Print a summary as JSON: units, sizes, pieces (quantity; per "
+                                 "size area cm^2, perimeter cm, notches, grain line), layers, the garment inferred."),
 ):
-    """Turn a DXF cutting pattern into a GarmentCode specification (pattern.json, for `tryon drape
-    --garment`) and an SVG of its panels with every edge numbered."""
+    """Read a DXF cutting pattern, every piece in every graded size, and turn one size into a
+    GarmentCode specification: without --assembly the garment is inferred (which pieces, which
+    seams, where each piece goes on the body). Writes pattern.json (for `tryon drape --garment`;
+    drape also takes the DXF itself), pattern.svg (the panels, each seam in its own colour and
+    numbered) and assembly.json (the inference, to correct and give back with --assembly)."""
 
     def go():
-        from engine.pattern.dxf import import_dxf, load_assembly
-        from engine.pattern.io import pattern_to_svg, save_pattern
+        from engine.pattern.dxf import import_pattern, load_assembly, summary
+        from engine.pattern.io import save_pattern
         from engine.pattern.validate import check
 
         asm = load_assembly(assembly) if assembly is not None else None
-        spec, notes = import_dxf(dxf, asm, units)
-        problems = check(spec, dxf.name)  # errors raise; warnings come back
+        imp = import_pattern(dxf, size, units, asm)
+        problems = check(imp.spec, dxf.name)  # errors raise; warnings come back
         out.mkdir(parents=True, exist_ok=True)
-        for name, p in spec.pattern.panels.items():
-            typer.echo(f"{name}: {len(p.edges)} edges", err=True)
-        for line in [f"note: {n}" for n in notes] + [str(p) for p in problems]:
+        written = [save_pattern(imp.spec, out / "pattern.json"), out / "pattern.svg"]
+        (out / "pattern.svg").write_text(imp.svg())
+        if imp.assembly is not None:
+            (out / "assembly.json").write_text(json.dumps(imp.assembly, indent=1))
+            written.append(out / "assembly.json")
+        p = imp.pattern
+        typer.echo(f"{dxf.name}: {len(p.pieces)} pieces x {len(p.sizes)} sizes ({', '.join(p.sizes)}); units "
+                   f"{p.units_note}; size {imp.size}: {imp.kind}, {len(imp.spec.pattern.panels)} panels, "
+                   f"{len(imp.spec.pattern.stitches)} stitches", err=True)
+        for line in ([f"note: {n}" for n in p.notes + imp.notes] + [f"left out: {n}" for n in imp.left_out]
+                     + [f"unsure: {n}" for n in imp.unsure] + [str(q) for q in problems]):
             typer.echo(line, err=True)
-        (out / "pattern.svg").write_text(pattern_to_svg(spec, edge_numbers=True))
-        typer.echo(str(save_pattern(spec, out / "pattern.json")))
-        typer.echo(str(out / "pattern.svg"))
+        if as_json:
+            typer.echo(json.dumps(summary(p, imp), indent=1))
+        else:
+            for w in written:
+                typer.echo(str(w))
 
     _run(go)
 

@@ -34,10 +34,11 @@ warnings.filterwarnings("ignore", category=NumbaPerformanceWarning, message=r"(?
 ENGINE = Path(__file__).resolve().parent
 
 
-def kernel_sources(root: Path = ENGINE) -> list[Path]:
+@lru_cache(maxsize=None)
+def kernel_sources(root: Path = ENGINE) -> tuple[Path, ...]:
     """The engine's files that define numba kernels (they import their decorators from engine.jit)."""
-    return sorted(p for p in root.rglob("*.py")
-                  if p.name == "jit.py" or "from engine.jit import" in p.read_text(encoding="utf-8"))
+    return tuple(sorted(p for p in root.rglob("*.py")
+                        if p.name == "jit.py" or "from engine.jit import" in p.read_text(encoding="utf-8")))
 
 
 def _imported_files(path: Path, root: Path) -> set[Path]:

@@ -7,6 +7,7 @@ SAMPLES = ROOT.parent / "shared" / "samples" / "garmentcode"
 SAMPLE_BODY = SAMPLES / "mean_female.obj"
 SAMPLE_YAML = SAMPLES / "mean_female.yaml"
 SAMPLE_SKIRT = SAMPLES / "flare_skirt_specification.json"
+DXF_SAMPLES = ROOT.parent / "shared" / "samples" / "dxf"  # real pattern-CAD exports (their README)
 # GarmentCode's own T-shirt (tests/garmentcode/README.md): a sleeved pattern file
 GC_SHIRT = ROOT / "tests" / "garmentcode" / "shirt_mean_specification.json"
 
@@ -40,3 +41,13 @@ def write_arms_lowered_scan(path, degrees: float):
                                                                        "upperarm01.R": _rot("z", degrees)}))
     trimesh.Trimesh(posed, a_pose.faces, process=False).export(path)
     return path
+
+
+def set_engine_env(mp, **env):
+    """Set TRYON_* variables for one test (pytest's monkeypatch `mp`) and make the engine read
+    its settings again (engine.settings keeps what it read; `mp` restores both afterwards)."""
+    import engine.settings
+
+    for k, v in env.items():
+        mp.setenv(k, v)
+    mp.setattr(engine.settings, "_current", None)

@@ -8,8 +8,10 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.main import create_app
-from app.settings import Settings
+from app.core.config import Settings
 from tests.samples import SAMPLE_BODY, SAMPLE_SKIRT, write_anim_zip, write_arms_lowered_scan
+
+pytestmark = pytest.mark.integration  # (dresses, walks, or runs the service)
 
 
 def _settings(tmp_path, **kw):
@@ -146,7 +148,7 @@ def test_upload_says_what_the_loader_and_the_measurements_found(idle, tmp_path):
 
 
 def test_upload_size_cap(tmp_path):
-    with TestClient(create_app(_settings(tmp_path, max_upload_bytes=1000), start_workers=False)) as c:
+    with TestClient(create_app(_settings(tmp_path, max_upload_mb=1000 / 2 ** 20), start_workers=False)) as c:
         h = token(c)
         r = c.post("/api/bodies", files={"file": ("big.obj", b"v 0 0 0\n" * 500)}, headers=h)
         assert r.status_code == 413 and "MB" in r.json()["error"]
@@ -324,22 +326,30 @@ def test_viewer_relay_live_and_recording(tmp_path):
             if j["status"] == "running" and j["viewer"]:
                 break
             time.sleep(0.2)
-        assert j["viewer"] == f"/viewer/{jid}/", j
-        page = c.get(f"/viewer/{jid}/?token={tok}")
+        assert j["viewer"].startswith(f"/viewer/{jid}/?key="), j
+        key = j["viewer"].split("key=")[1]
+        page = c.get(j["viewer"])
         assert page.status_code == 200 and "<html" in page.text[:200].lower()
-        assert c.get(f"/viewer/{jid}/?token={other}").status_code == 404
+        assert tok not in page.headers.get("set-cookie", "")  # the cookie holds the job key, not the token
+        c.cookies.clear()
+        other_job = c.post("/api/tryons", json={"body": "default:female", "garment": "skirt"},
+                           headers={"Authorization": f"Bearer {other}"}).json()
+        other_key = other_job["viewer"] or c.app.state.keys.job_key(other_job["id"])
+        assert c.get(f"/viewer/{jid}/?key={other_key}").status_code == 401  # one job's key opens only it
+        assert c.get(f"/viewer/{jid}/?token={tok}").status_code == 401  # never the API token in a URL
         proto = f"viser-v{viser.__version__}"
-        with c.websocket_connect(f"/viewer/{jid}?token={tok}", subprotocols=[proto]) as ws:
+        with c.websocket_connect(f"/viewer/{jid}?key={key}", subprotocols=[proto]) as ws:
             assert ws.accepted_subprotocol == proto
             first = ws.receive_bytes()  # viser's messages (msgpack), relayed
             assert len(first) > 0
         j = wait(c, h, jid)
         assert j["status"] == "done", j
-        r = c.get(f"/viewer/{jid}/?token={tok}", follow_redirects=False)
+        r = c.get(j["viewer"], follow_redirects=False)
         assert r.status_code == 307 and "playbackPath" in r.headers["location"]
-        rec = c.get(f"/viewer/{jid}/recording.viser?token={tok}")
+        rec = c.get(f"/viewer/{jid}/recording.viser?key={key}")
         assert rec.status_code == 200 and len(rec.content) > 10000  # body + cloth frames
-        assert c.get(f"/viewer/{jid}/recording.viser?token={other}").status_code == 404
+        c.cookies.clear()
+        assert c.get(f"/viewer/{jid}/recording.viser?key={other_key}").status_code == 401
 
 
 def test_settings_tokens_and_listing(tmp_path):
@@ -356,7 +366,8 @@ def test_settings_tokens_and_listing(tmp_path):
         r = c.post("/api/tryons", json={"body_id": b["id"], "garment": g["id"], "size": "M"}, headers=h)
         assert r.status_code == 422 and "own size" in r.json()["error"]
         assert [x["id"] for x in c.get("/api/tryons", headers=h).json()] == [j.json()["id"]]
-        assert c.get(f"/viewer/{j.json()['id']}/?token=shop-backend").status_code == 409  # queued: nothing yet
+        key = c.app.state.keys.job_key(j.json()["id"])
+        assert c.get(f"/viewer/{j.json()['id']}/?key={key}").status_code == 409  # queued: nothing yet
         assert c.delete(f"/api/garments/{g['id']}", headers=h).status_code == 204
         assert c.get(f"/api/garments/{g['id']}", headers=h).status_code == 404
         assert not any((c.app.state.settings.data_dir / "uploads").glob("pattern-*"))
@@ -391,7 +402,7 @@ def test_cancel_and_delete_running(tmp_path):
 def test_worker_warm_up_loads_the_engine_and_never_raises(monkeypatch, capsys):
     """A fresh worker, while no try-on waits, dresses a coarse skirt once (kernels, body, GL
     context); a failure there is reported and printed, never raised (the worker goes on)."""
-    from app.worker import warm_up
+    from app.queue.worker import warm_up
 
     r = warm_up()
     assert r["ok"] is True and r["seconds"] > 0
@@ -403,3 +414,31 @@ def test_worker_warm_up_loads_the_engine_and_never_raises(monkeypatch, capsys):
     r = warm_up()
     assert r["ok"] is False
     assert "no GL here" in capsys.readouterr().err
+
+
+def test_settings_from_the_environment(monkeypatch, tmp_path):
+    """Every TRYON_* variable lands in one Settings (the engine's too); the workers get them
+    handed down, with the query helpers off when there is a worker per core (unless set)."""
+    import os
+
+    from app.core.db import DB
+    from app.queue.supervisor import JobManager
+    from engine.errors import InputError
+    from engine.settings import read
+
+    cores = os.cpu_count() or 1
+    env = {"TRYON_DATA": str(tmp_path / "d"), "TRYON_TOKENS": "a, b,", "TRYON_MAX_UPLOAD_MB": "0.5",
+           "TRYON_WORKERS": str(min(cores, 16)), "TRYON_MAX_TRIANGLES": "3e5", "TRYON_GL": "OSMesa"}
+    for k, v in env.items():
+        monkeypatch.setenv(k, v)
+    s = read(Settings)
+    assert s.data_dir == tmp_path / "d" and s.db == tmp_path / "d" / "jobs.sqlite" and s.tokens == ["a", "b"]
+    assert s.max_upload_bytes == 2 ** 19 and s.max_triangles == 300_000 and s.gl == "osmesa"
+    manager = JobManager(s, DB(s.db))
+    assert manager.worker_settings().query_helper is (cores > 16)
+    monkeypatch.setenv("TRYON_QUERY_HELPER", "1")
+    assert JobManager(read(Settings), manager.db).worker_settings().query_helper is True
+    for name, value in (("TRYON_QUEUE_MAX", "lots"), ("TRYON_WORKERS", "99")):
+        monkeypatch.setenv(name, value)
+        with pytest.raises(InputError, match=f"{name}='{value}'"):
+            read(Settings)

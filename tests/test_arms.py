@@ -9,6 +9,8 @@ from engine.body.types import SEGMENTS
 from engine.scene.request import TryOnOptions
 from tests.samples import write_arms_lowered_scan
 
+pytestmark = pytest.mark.integration  # (dresses, walks, or runs the service)
+
 
 @pytest.fixture(scope="module")
 def arms30(tmp_path_factory):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from tests.samples import SAMPLE_BODY, SAMPLE_YAML  # noqa: F401
+from tests.samples import SAMPLE_BODY, SAMPLE_YAML, set_engine_env  # noqa: F401
 from engine.body.load import load_body_file
 from engine.errors import InputError
 
@@ -231,7 +231,7 @@ def test_refuse_sizes(tmp_path, source):
 def test_refuse_triangle_cap(tmp_path, source, monkeypatch):
     path = write(tmp_path / "b.ply", *source)
     refuse(path, "limit of 1,000", max_triangles=1000)
-    monkeypatch.setenv("TRYON_MAX_TRIANGLES", "2000")
+    set_engine_env(monkeypatch, TRYON_MAX_TRIANGLES="2000")
     refuse(path, "limit of 2,000")
 
 

@@ -8,7 +8,6 @@ checked as well, otherwise the winding number (which has no ray/edge degeneracie
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -191,6 +191,7 @@ def test_trousers_start_unstretched_round_the_ankles_and_at_their_own_heights(bo
     assert np.percentile(strain[near], 99) < 0.2 and strain[near].max() < 0.3, np.percentile(strain[near], [99, 100])
 
 
+@pytest.mark.integration
 def test_sleeves_go_on_a_scans_arms():
     """A scan has no skeleton: the shirt's sleeves are placed along the arms of the default
     skeleton fitted to it (engine.body.fit), around the scan's own arms -- before, sleeved
@@ -229,6 +230,7 @@ def test_an_arm_axis_ending_on_its_own_point_still_places_a_sleeve():
         arm_path(np.repeat(p[:1], 3, axis=0))
 
 
+@pytest.mark.integration
 def test_auto_size_dresses_the_next_size_when_the_drape_refuses_one():
     """--size auto: the girths' size is dressed first; a drape that refuses it as too small
     (SimulationError marked too_small) makes the next larger size dressed, at most AUTO_TRIES
@@ -317,6 +319,7 @@ def test_size_auto_goes_smaller_when_a_size_slides_down():
     assert asked == ["M", "L"] and res == "M" and rep["tight"]
 
 
+@pytest.mark.integration
 def test_shoulder_seams_open_with_the_arms_close_are_sewn_again_with_the_arms_raised(monkeypatch):
     """default:female as a scan with its arms lowered 20 degrees (5.4 cm from the torso 10 cm
     below the armpits, Measurements.arm_gap): a sewing failure beside the arms is dressed again in
@@ -389,6 +392,7 @@ def test_shoulder_seams_open_with_the_arms_close_are_sewn_again_with_the_arms_ra
         dress_in_size("dress", scan, "S", refusing(m.armpit_height + 0.1))
 
 
+@pytest.mark.integration
 def test_cloth_stretched_beside_close_arms_is_dressed_again_with_the_arms_raised(monkeypatch):
     """The same body (arms 5.4 cm from the torso). A drape refused as too small, or reported
     tight, whose most stretched cloth lies beside the arms is dressed again with the arms raised:

@@ -12,7 +12,7 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from tests.samples import SAMPLE_BODY, SAMPLE_YAML  # noqa: F401
+from tests.samples import SAMPLE_BODY, SAMPLE_YAML, set_engine_env  # noqa: F401
 from engine.cli import app
 
 SAMPLE = SAMPLE_BODY
@@ -83,10 +83,15 @@ def test_refusals_through_cli(tmp_path, monkeypatch):
     for extra in (["--up", "q"], ["--front", "+y", "--up", "y"]):
         r = runner.invoke(app, ["body", "info", str(SAMPLE), *extra])
         _one_line_error(r.exit_code, r.stderr)
-    monkeypatch.setenv("TRYON_MAX_TRIANGLES", "1000")
+    set_engine_env(monkeypatch, TRYON_MAX_TRIANGLES="1000")
     r = runner.invoke(app, ["body", "info", str(SAMPLE)])
     _one_line_error(r.exit_code, r.stderr)
     assert "limit of 1,000" in r.stderr
+    for name, value in (("TRYON_MAX_TRIANGLES", "many"), ("TRYON_GL", "vulkan")):  # read once, up front
+        set_engine_env(monkeypatch, **{name: value})
+        r = runner.invoke(app, ["body", "info", str(SAMPLE)])
+        _one_line_error(r.exit_code, r.stderr)
+        assert r.exit_code == 2 and f"{name}='{value}'" in r.stderr, r.stderr
 
 
 @pytest.mark.parametrize("name", ["garbage_obj", "nan"])

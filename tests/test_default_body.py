@@ -20,12 +20,13 @@ from engine.body.default import PRESETS, default_body
 from engine.body.rig import skin
 from engine.body.types import SEGMENT_ID, SEGMENTS
 from engine.errors import InputError
+from tests.samples import set_engine_env
 
 
 @pytest.fixture(scope="session", autouse=True)
 def _session_cache(tmp_path_factory):
     with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("TRYON_CACHE", str(tmp_path_factory.mktemp("tryon_cache")))
+        set_engine_env(mp, TRYON_CACHE=str(tmp_path_factory.mktemp("tryon_cache")))
         yield
 
 
@@ -206,7 +207,7 @@ def test_resolve_body_spec():
 
 
 def test_cache_used_without_anny(monkeypatch, tmp_path):
-    monkeypatch.setenv("TRYON_CACHE", str(tmp_path))
+    set_engine_env(monkeypatch, TRYON_CACHE=str(tmp_path))
     first = default_body("male", weight=0.6)
     files = list((tmp_path / "default_body").iterdir())
     assert [f.suffix for f in files] == [".npz"]  # no temporary files left behind
@@ -232,7 +233,7 @@ def test_cache_used_without_anny(monkeypatch, tmp_path):
 
 
 def test_damaged_cache_file_is_rebuilt(monkeypatch, tmp_path):
-    monkeypatch.setenv("TRYON_CACHE", str(tmp_path))
+    set_engine_env(monkeypatch, TRYON_CACHE=str(tmp_path))
     good = default_body("female", muscle=0.4)
     (path,) = (tmp_path / "default_body").glob("*.npz")
     path.write_bytes(b"not a zip file")

@@ -17,6 +17,8 @@ from engine.scene.request import TryOnOptions
 from engine.scene.tuning import DrapeTuning, SewTuning, Tuning
 from tests.samples import GC_SHIRT, SAMPLE_BODY, SAMPLE_SKIRT, write_arms_lowered_scan
 
+pytestmark = pytest.mark.integration  # (dresses, walks, or runs the service)
+
 REPORT_KEYS = {"cloth_vertices", "iterations", "ms_per_iteration", "wall_seconds", "penetration_mm", "strain",
                "seam_gap_mm", "settled", "left_out", "shift_mm", "warnings"}
 

@@ -52,6 +52,7 @@ def _folded_edges(rest: np.ndarray, posed: np.ndarray, faces: np.ndarray) -> np.
     return e[order][pair][(cosines(rest) > 0.7) & (cosines(posed) < 0.0)]
 
 
+@pytest.mark.integration
 def test_the_sample_scan_walks_without_its_skin_folding():
     """The weights a scan takes from the nearest template vertex jump where the mapped template
     is off the scan by more than its edges; fit_rig smooths them over the scan's surface below

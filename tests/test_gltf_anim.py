@@ -170,6 +170,7 @@ def test_corrupt_accessor_is_refused(tmp_path):
         sample_gltf_animation(p, fps=30)
 
 
+@pytest.mark.integration
 def test_walk_cli_with_an_animated_glb(tmp_path):
     """`tryon walk --body walk.glb`: an animated glTF is played as the motion (a static one would
     be a scan); the garment is dressed on its first frame and walks to the animation's end."""

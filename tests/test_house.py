@@ -5,6 +5,7 @@ bottom, and no function with more than 12 parameters outside numba kernels."""
 from __future__ import annotations
 
 import ast
+from functools import lru_cache
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -21,6 +22,7 @@ ALLOWED = {
 BASE = {"engine.errors", "engine.jit", "engine.settings"}
 
 
+@lru_cache(maxsize=None)
 def _modules(top: str) -> dict[str, tuple[Path, ast.AST]]:
     out = {}
     for p in (ROOT / top).rglob("*.py"):
@@ -30,7 +32,7 @@ def _modules(top: str) -> dict[str, tuple[Path, ast.AST]]:
     return out
 
 
-def _imports(tree: ast.AST, known: set[str]) -> set[str]:
+def _imports(tree: ast.AST, known) -> set[str]:
     """The project modules a module imports anywhere in it (functions included)."""
     out = set()
     for n in ast.walk(tree):

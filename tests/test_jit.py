@@ -46,6 +46,7 @@ def _src(f):
     return inspect.getsource(f.py_func)
 
 
+@pytest.mark.integration
 def test_serial_kernels_compile_without_parallel_loops():
     spec = PatternSpec.model_validate({"pattern": {"panels": {"sq": {
         "vertices": [[0, 0], [20, 0], [20, 20], [0, 20]], "edges": [{"endpoints": [i, (i + 1) % 4]} for i in range(4)],

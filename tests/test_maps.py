@@ -29,6 +29,7 @@ def _env(backend: str) -> dict:
 
 
 @outer
+@pytest.mark.integration  # (every map test, in a fresh process per OpenGL backend)
 @pytest.mark.parametrize("backend", ["egl", "osmesa"])
 def test_backend(backend):
     probe = subprocess.run(

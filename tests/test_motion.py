@@ -127,6 +127,7 @@ def test_cycle_repeats_shifted_by_the_stride(track):
     assert np.abs(track.velocities(b) - track.velocities(a)).max() < 1e-5
 
 
+@pytest.mark.integration  # (walk tracks of the default body, several seconds)
 def test_velocities_match_the_motion(female):
     """The stored world velocities agree with central differences of the frames (at 120 fps:
     at 30 fps the difference quotient itself is 0.09 m/s off where the pelvis speeds up), in
@@ -152,6 +153,7 @@ def test_velocities_match_the_motion(female):
     assert np.median(medians) < 0.01, np.median(medians)
 
 
+@pytest.mark.integration  # (walk tracks of the default body, several seconds)
 def test_the_pelvis_does_not_jolt_at_heel_strike(female):
     """Planted, the body's vertical velocity jumped by ~0.5 m/s from one instant to the next
     at each heel strike (the lowest foot point moves to the other foot), its forward by ~0.2:

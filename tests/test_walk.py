@@ -283,6 +283,7 @@ def walked():
     return body, res, w, walk_report(rep, w.report)
 
 
+@pytest.mark.integration
 def test_walking_skirt_stays_on_and_out_of_the_body(walked):
     body, res, w, report = walked
     assert np.all(np.isfinite(w.garment_frames))
@@ -303,6 +304,7 @@ def test_walking_skirt_stays_on_and_out_of_the_body(walked):
     assert abs(w.garment_frames[-1][:, 1].max() - top0) < 0.05
 
 
+@pytest.mark.integration
 def test_walk_springs_are_softer_and_stiffen_when_the_strain_limit_loses(walked):
     """The walk runs at TryOnOptions.walk_stiffness x the drape's springs, at the eq. 4 step of those
     (a quarter: twice the drape's step, in whole substeps a frame); a frame whose strain passes
@@ -329,6 +331,7 @@ def test_walk_springs_are_softer_and_stiffen_when_the_strain_limit_loses(walked)
     assert np.all(np.isfinite(w2.garment_frames))
 
 
+@pytest.mark.integration
 def test_maps_rendered_ahead_give_the_same_walk(walked):
     """Maps rendered one frame ahead in a helper thread (its own GL context) are the maps the
     walk renders when the frame comes up: the same cloth bit for bit; the thread ends with the
@@ -348,6 +351,7 @@ def test_maps_rendered_ahead_give_the_same_walk(walked):
     assert (maps.kind == 1).any()
 
 
+@pytest.mark.integration
 def test_walk_report_fields(walked):
     _, _, w, report = walked
     for key in ("cloth_vertices", "iterations", "penetration_mm", "strain", "settled", "frames", "fps",
@@ -363,6 +367,7 @@ def test_walk_report_fields(walked):
     assert report["walk"]["push_time_ms"] == 1000 * WalkTuning().step.push_time
 
 
+@pytest.mark.integration
 def test_walk_outputs(walked, tmp_path):
     from PIL import Image
 
@@ -381,6 +386,7 @@ def _walk_cli(tmp_path, *args):
     return CliRunner().invoke(app, ["walk", "--out", str(tmp_path / "o"), *map(str, args)])
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("args, words", [
     (["--body", "default:female", "--garment", "skirt", "--seconds", "0"], "--seconds"),
     (["--body", "default:female", "--garment", "skirt", "--speed", "40"], "speed"),
@@ -414,6 +420,7 @@ def anim_zip(tmp_path_factory):
     return write_anim_zip(tmp_path_factory.mktemp("anim") / "walk.zip", frames, body.faces), frames
 
 
+@pytest.mark.integration  # (walk tracks of the default body, several seconds)
 def test_load_animation(anim_zip):
     from engine.body.animation import load_animation
 
@@ -453,6 +460,7 @@ def test_load_animation_refuses_bad_files(tmp_path, make, words):
         load_animation(p, fps=30)
 
 
+@pytest.mark.integration
 def test_walk_cli_with_an_uploaded_animation(anim_zip, tmp_path):
     path, frames = anim_zip
     r = _walk_cli(tmp_path, "--body", path, "--garment", "skirt", "--resolution", "3", "--seconds", "2")
@@ -465,6 +473,7 @@ def test_walk_cli_with_an_uploaded_animation(anim_zip, tmp_path):
     assert (tmp_path / "o" / "anim.glb").stat().st_size > 1000
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("args", [["--speed", "2.4"], ["--speed", "3.6"], ["--fabric", "denim"], ["--fabric", "silk"]])
 def test_walk_stability(tmp_path, args):
     """Twice and three times the walking speed, a stiff and a very light fabric (all at the eq. 4
@@ -484,6 +493,7 @@ def test_walk_stability(tmp_path, args):
         assert not (tmp_path / "o" / "anim.glb").exists()
 
 
+@pytest.mark.integration
 def test_walk_refuses_a_garment_far_too_small(tmp_path):
     """XS on a heavy body: the seams close, but the skirt would be stretched ~50 % (measured
     before the check existed): refused before walking, nothing written."""
@@ -520,6 +530,7 @@ def test_walking_quality(tmp_path, garment):
         assert np.linalg.norm((cloth_c - body_c)[[0, 2]]) < 0.10, (i, cloth_c, body_c)
 
 
+@pytest.mark.integration
 def test_object_space_walk(walked):
     """The BVH baseline on the moving body (refitted per frame): same checks as image space."""
     from engine.scene.walk import walk_cloth
@@ -575,6 +586,7 @@ def test_walk_options_refuse_absurd_solver_settings(make, words):
         make()
 
 
+@pytest.mark.integration  # (walk tracks of the default body, several seconds)
 def test_collision_checks_keep_pace_with_the_body():
     """By default the walk checks collisions as often as keeps the body's bulk travel between two
     checks within check_travel: every 8th step at a normal walk, more often when faster."""

@@ -23,11 +23,14 @@ import numpy as np
 from engine.body.load import _read, load_body_file
 from engine.body.motion import BodyTrack, frame_velocities
 from engine.body.types import Body
-from engine.errors import InputError
+from engine.errors import InputError, parser
 
 MAX_FRAMES = 3000
+MAX_UNZIPPED = 2 * 2 ** 30  # bytes of OBJ frames a zip may expand to
+MAX_RATIO = 100  # expanded / compressed size of a member (OBJ text compresses ~5-10 x)
 
 
+@parser("an animation")
 def load_animation(path: str | Path, fps: float, up: str | None = None, front: str | None = None) -> BodyTrack:
     path = Path(path)
     if not (5.0 <= fps <= 240.0):
@@ -58,6 +61,7 @@ def load_animation(path: str | Path, fps: float, up: str | None = None, front: s
             raise InputError(f"{path.name} holds {len(names)} OBJ frame(s): an animation needs at least 2")
         if len(names) > MAX_FRAMES:
             raise InputError(f"{path.name} holds {len(names)} frames, more than {MAX_FRAMES}: shorten the animation")
+        _check_sizes(path.name, [z.getinfo(n) for n in names])
         files = []
         for i, n in enumerate(names):
             p = Path(tmp) / f"{i:05d}.obj"  # our own names: never a path from the zip
@@ -75,6 +79,19 @@ def load_animation(path: str | Path, fps: float, up: str | None = None, front: s
     return _track(path, first, frames_raw, names, fps, [])
 
 
+def _check_sizes(name: str, members: list) -> None:
+    """Refuse a zip bomb before extracting: the sizes its directory states (zipfile reads no more
+    than a member's stated size) in total and against each member's compressed size."""
+    total = sum(m.file_size for m in members)
+    if total > MAX_UNZIPPED:
+        raise InputError(f"{name} expands to {total / 2 ** 30:.1f} GiB, more than {MAX_UNZIPPED / 2 ** 30:.0f}: "
+                         "send fewer or smaller frames")
+    for m in members:
+        if m.file_size > MAX_RATIO * max(m.compress_size, 1024):
+            raise InputError(f"{name}: '{m.filename}' expands {m.file_size / max(m.compress_size, 1):.0f} times: "
+                             "not an OBJ frame (a zip bomb?)")
+
+
 def _track(path: Path, first: Body, frames_raw: list, names: list[str], fps: float, notes: list[str]) -> BodyTrack:
     """The frames (file coordinates) moved like the first frame was when it was loaded as a scan."""
     raw0 = frames_raw[0]
@@ -87,10 +104,10 @@ def _track(path: Path, first: Body, frames_raw: list, names: list[str], fps: flo
         raise InputError(f"{path.name}: the first frame could not be matched to its repaired mesh")
     frames = np.empty((len(frames_raw), len(first.vertices), 3), np.float32)
     for k, v in enumerate(frames_raw):
-        w = v[index] @ a[:3, :3].T + a[:3, 3]
-        if not np.all(np.isfinite(w)):
+        with np.errstate(over="ignore", invalid="ignore"):
+            frames[k] = v[index] @ a[:3, :3].T + a[:3, 3]
+        if not np.all(np.isfinite(frames[k])):  # checked in float32: finite float64 may overflow it
             raise InputError(f"frame '{names[k]}' has non-finite vertex positions")
-        frames[k] = w
     vel = frame_velocities(frames, fps)
     speed = np.linalg.norm(vel, axis=2).max()
     if speed > 20.0:

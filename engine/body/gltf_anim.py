@@ -24,12 +24,16 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.errors import InputError
+from engine.errors import MALFORMED, InputError, parser
 
 _COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _NORM = {np.int8: 127.0, np.uint8: 255.0, np.int16: 32767.0, np.uint16: 65535.0}
 MAX_SECONDS = 120.0
+MAX_FRAMES = 3000  # frames sampled at most (engine.body.animation refuses more too)
+MAX_VALUES = 50_000_000  # accessor values (count x width) and sampled coordinates at most: ~400 MB in float64
+MAX_PARTS = 512  # triangle primitives in the scene: a body is one or a few meshes (3,000 copies of one
+                 # 20-vertex primitive, a 240 KB file, took 30 s to merge)
 
 
 class _File:
@@ -95,12 +99,17 @@ class _File:
             width, count = _WIDTH[a["type"]], int(a["count"])
         except (IndexError, KeyError, TypeError):
             raise InputError(f"{self.name}: accessor {i} is missing or malformed") from None
+        if not 0 <= count * width <= MAX_VALUES:  # checked before anything is allocated
+            raise InputError(f"{self.name}: accessor {i} claims {count:,} elements: the file is corrupt or too large")
         item = np.dtype(dtype).itemsize
         if "bufferView" in a:
             view = self.doc["bufferViews"][a["bufferView"]]
             data = self.buffers[view["buffer"]]
             start = view.get("byteOffset", 0) + a.get("byteOffset", 0)
             stride = view.get("byteStride") or item * width
+            if stride < item * width:  # rows would overlap: one small buffer read as many elements
+                raise InputError(f"{self.name}: accessor {i} has a byte stride of {stride}, less than its "
+                                 f"element ({item * width} bytes): the file is corrupt")
             end = start + (count - 1) * stride + item * width if count else start
             if end > view.get("byteOffset", 0) + view["byteLength"] or end > len(data):
                 raise InputError(f"{self.name}: accessor {i} reads past its buffer: the file is corrupt")
@@ -111,6 +120,8 @@ class _File:
         if "sparse" in a:
             sp = a["sparse"]
             n = int(sp["count"])
+            if not 0 <= n <= count:
+                raise InputError(f"{self.name}: accessor {i} has {n:,} sparse values for {count:,} elements")
             iv = self.doc["bufferViews"][sp["indices"]["bufferView"]]
             idx = np.frombuffer(self.buffers[iv["buffer"]], dtype=_COMPONENT[sp["indices"]["componentType"]], count=n,
                                 offset=iv.get("byteOffset", 0) + sp["indices"].get("byteOffset", 0))
@@ -184,6 +195,30 @@ class _Sampler:
         return r / max(np.linalg.norm(r), 1e-12) if self.rotation else r
 
 
+def _node_parents(name: str, nodes: list) -> dict[int, int]:
+    """{child: parent} of the node hierarchy, which glTF requires to be disjoint trees: a node
+    with two parents, a child that does not exist or a cycle is refused (before anything walks it)."""
+    parent: dict[int, int] = {}
+    for i, n in enumerate(nodes):
+        for c in n.get("children", []):
+            c = int(c)
+            if not 0 <= c < len(nodes) or c == i or c in parent:
+                raise InputError(f"{name}: node {i} lists child {c}, which does not exist or already has a "
+                                 "parent: the node hierarchy must be trees")
+            parent[c] = i
+    rooted: set[int] = set()  # nodes known to reach a root: each node is walked once
+    for i in range(len(nodes)):
+        walk, j = [], i
+        while j not in rooted and j in parent:
+            walk.append(j)
+            j = parent[j]
+            if j == i or len(walk) > len(nodes):
+                raise InputError(f"{name}: the nodes' children form a cycle through node {i}: the node "
+                                 "hierarchy must be trees")
+        rooted.update(walk)
+    return parent
+
+
 def has_animation(path: str | Path) -> bool:
     """Whether a glTF file holds an animation (a static .glb is a scan, not a motion)."""
     path = Path(path)
@@ -191,10 +226,11 @@ def has_animation(path: str | Path) -> bool:
         return False
     try:
         return bool(_File(path, buffers=False).doc.get("animations"))
-    except InputError:
+    except (InputError, *MALFORMED):  # not readable as animated glTF: the scan loader says why
         return False
 
 
+@parser("an animated glTF")
 def sample_gltf_animation(path: str | Path, fps: float) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """(frames (T, N, 3) float64 in the file's axes and units, faces (F, 3) int64, notes)."""
     path = Path(path)
@@ -226,18 +262,21 @@ def sample_gltf_animation(path: str | Path, fps: float) -> tuple[np.ndarray, np.
     n_frames = int(np.floor(end * fps + 1e-6)) + 1
     if n_frames < 2:
         raise InputError(f"{path.name}: the animation lasts {end:.3f} s, under one frame at {fps:g} fps")
+    if n_frames > MAX_FRAMES:
+        raise InputError(f"{path.name} gives {n_frames} frames at {fps:g} fps, more than {MAX_FRAMES}: "
+                         "shorten the animation")
 
-    parent = {}
-    for i, n in enumerate(nodes):
-        for c in n.get("children", []):
-            parent[int(c)] = i
+    parent = _node_parents(path.name, nodes)
     scenes = doc.get("scenes") or [{"nodes": [i for i in range(len(nodes)) if i not in parent]}]
     roots = scenes[int(doc.get("scene", 0))].get("nodes", [])
-    in_scene, stack = [], list(roots)
+    in_scene, stack, seen = [], [int(r) for r in roots], set()
     while stack:
-        i = int(stack.pop())
+        i = stack.pop()
+        if i in seen:  # a root listed twice, or below another root
+            continue
+        seen.add(i)
         in_scene.append(i)
-        stack += nodes[i].get("children", [])
+        stack += [int(c) for c in nodes[i].get("children", [])]
 
     def local(i: int, t: float) -> np.ndarray:
         n = nodes[i]
@@ -286,10 +325,16 @@ def sample_gltf_animation(path: str | Path, fps: float) -> tuple[np.ndarray, np.
                         raise InputError(f"{path.name}: a vertex names joint {joints.max()}, the skin has "
                                          f"{len(skin['joints'])}")
             prims.append((i, pos, targets, default_w, skin, joints, weights))
+            if len(prims) > MAX_PARTS:
+                raise InputError(f"{path.name} has more than {MAX_PARTS} mesh parts: a body is one mesh (or a few); "
+                                 "merge them on export")
             faces.append(idx.reshape(-1, 3) + offset)
             offset += len(pos)
     if not prims:
         raise InputError(f"{path.name} contains no triangle mesh")
+    if n_frames * offset * 3 > MAX_VALUES:
+        raise InputError(f"{path.name}: {n_frames} frames of {offset:,} vertices are too many to sample: "
+                         "shorten the animation, lower the frame rate or decimate the mesh")
     ibm_cache = {}
 
     frames = np.empty((n_frames, offset, 3))

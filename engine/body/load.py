@@ -18,7 +18,6 @@ that spans the gap between an arm and the torso is bridged (the armpits are then
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +26,8 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from engine.body.types import Body
-from engine.errors import InputError
+from engine.errors import InputError, parser
+from engine.settings import current
 
 SUPPORTED = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0), "-z": (2, -1.0)}
@@ -35,16 +35,17 @@ UNITS = ((1.0, "metres"), (0.1, "decimetres"), (0.01, "centimetres"), (0.001, "m
 HUMAN_HEIGHT = (0.5, 2.5)  # m; the metric scales give non-overlapping raw ranges ...
 ADULT_HEIGHT = (1.3, 2.3)  # m: ... inches overlap centimetres (70 units: 1.78 m or 0.70 m): the adult
 # reading wins, and inches are taken for adults only
-DEFAULT_MAX_TRIANGLES = 2_000_000
+MAX_PARTS = 512  # mesh parts placed in a scene file (one small part placed thousands of times took minutes)
 TINY_PIECE = 0.01  # drop components under this fraction of the total surface area
 
 
+@parser("a mesh")
 def load_body_file(path, up: str | None = None, front: str | None = None,
                    max_triangles: int | None = None, fill_holes: bool = True) -> Body:
     """Read a mesh file and return a normalised Body (see module doc).
 
     up / front: "+x" "-x" "+y" "-y" "+z" "-z" in the file's coordinates, overriding detection.
-    max_triangles: refuse bigger meshes; None -> env TRYON_MAX_TRIANGLES or 2,000,000.
+    max_triangles: refuse bigger meshes; None -> the TRYON_MAX_TRIANGLES setting (engine.settings).
     fill_holes: close holes (module doc); False keeps the file's vertices one for one (the first
     frame of an animation, whose other frames move the same vertices).
     Raises InputError (one line) for anything that cannot be used.
@@ -116,13 +117,7 @@ def _axis_name(ax) -> str:
 def _triangle_cap(max_triangles: int | None) -> int:
     if max_triangles is not None:
         return int(max_triangles)
-    env = os.environ.get("TRYON_MAX_TRIANGLES")
-    if env:
-        try:
-            return int(float(env))
-        except ValueError:
-            raise InputError(f"TRYON_MAX_TRIANGLES='{env}' is not a number: set it to a triangle count, e.g. 2000000") from None
-    return DEFAULT_MAX_TRIANGLES
+    return current().max_triangles
 
 
 def _read(path: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -139,6 +134,9 @@ def _read(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
     try:
         scene = trimesh.load_scene(str(path), file_type=ext[1:], process=False)
+        if len(scene.graph.nodes_geometry) > MAX_PARTS:  # checked before the copies are made
+            raise InputError(f"{path.name} places more than {MAX_PARTS} mesh parts: a body is one mesh (or a few); "
+                             "merge them on export")
         geoms = scene.dump(concatenate=False)
     except Exception as e:  # trimesh raises anything on garbage; the user needs one line
         msg = str(e).splitlines()[0][:120] if str(e) else type(e).__name__

@@ -31,14 +31,20 @@ def _store_geo(geo, k, dx, dy, dz, length, limit):
 
 
 @njit(fastmath=True, cache=True, inline="always")
+def _spring_vector(x, a, b):
+    """Spring a-b's vector from a to b and its length."""
+    dx = x[b, 0] - x[a, 0]
+    dy = x[b, 1] - x[a, 1]
+    dz = x[b, 2] - x[a, 2]
+    return dx, dy, dz, np.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+@njit(fastmath=True, cache=True, inline="always")
 def _spring_geo(x, a, b, limit, geo, k):
     """If spring a-b is longer than `limit`, store its direction and excess in geo[k] (ux, uy,
     uz, length - limit) and return True. Positions do not move during a step's velocity
     modification, so its passes read this instead of measuring the spring again."""
-    dx = x[b, 0] - x[a, 0]
-    dy = x[b, 1] - x[a, 1]
-    dz = x[b, 2] - x[a, 2]
-    length = np.sqrt(dx * dx + dy * dy + dz * dz)
+    dx, dy, dz, length = _spring_vector(x, a, b)
     if length <= limit or length < 1e-12:
         return False
     _store_geo(geo, k, dx, dy, dz, length, limit)
@@ -163,10 +169,7 @@ def _project_one(x, a, b, lmax, inv_mass, keep_out, contact, contact_n, max_move
     """Move a and b toward each other (mass-weighted) back to length lmax, shortening the spring
     by at most max_move. keep_out: an end touching the body is not moved into it
     (outward_only), so the spring may stay a little long."""
-    dx = x[b, 0] - x[a, 0]
-    dy = x[b, 1] - x[a, 1]
-    dz = x[b, 2] - x[a, 2]
-    length = np.sqrt(dx * dx + dy * dy + dz * dz)
+    dx, dy, dz, length = _spring_vector(x, a, b)
     if length <= lmax or length < 1e-12:
         return False
     wa, wb = inv_mass[a], inv_mass[b]

@@ -6,6 +6,7 @@ PyOpenGL binds its function loader to a platform (PYOPENGL_PLATFORM) the first t
 backend and sets PYOPENGL_PLATFORM *before* it imports OpenGL; every engine module that draws
 imports GL from here (`from engine.collide.gl import GL, ensure_context`). Consequences:
   - the backend is fixed per process; to use the other one, start a process with TRYON_GL set
+    (engine.settings: read once)
     (tests and the benchmark do this with subprocess.run);
   - never fork a process after a context exists (use spawn) -- Mesa's threads do not survive it.
 
@@ -29,7 +30,8 @@ import sys
 import threading
 from dataclasses import dataclass
 
-from engine.errors import GLUnavailableError
+from engine.errors import GLUnavailableError, InputError
+from engine.settings import current
 
 _APT_HINT = ("install Mesa's headless drivers: apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri "
              "libgbm1 libopengl0 (EGL) or libosmesa6 (OSMesa)")
@@ -67,7 +69,7 @@ def _decide_backend() -> tuple[str, list[str]]:
     """(backend, notes on what was tried)."""
     notes: list[str] = []
     preset = os.environ.get("PYOPENGL_PLATFORM", "").strip().lower()
-    forced = os.environ.get("TRYON_GL", "").strip().lower()
+    forced = current().gl or ""
     if forced and forced not in _BACKENDS:
         raise GLUnavailableError(f"TRYON_GL={forced!r}: use egl or osmesa")
     if preset:
@@ -98,7 +100,7 @@ else:
         BACKEND, _NOTES = _decide_backend()
         os.environ["PYOPENGL_PLATFORM"] = BACKEND
         _DECISION_ERROR = None
-    except GLUnavailableError as e:
+    except (GLUnavailableError, InputError) as e:  # InputError: a bad TRYON_* setting
         BACKEND, _NOTES, _DECISION_ERROR = "none", [], e
 
 from OpenGL import GL  # noqa: E402  (must follow the platform decision above)

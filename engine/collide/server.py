@@ -26,7 +26,6 @@ thread is dead; not while the kernel has not started (its first call may compile
 
 from __future__ import annotations
 
-import os
 import threading
 import time
 import weakref
@@ -223,7 +222,9 @@ def helper_default() -> bool:
     """Whether colliders share their queries with a helper thread unless told (the environment's
     TRYON_QUERY_HELPER=0 turns it off: a machine running as many try-ons at once as it has cores
     has no idle core for the helpers to spin on)."""
-    return os.environ.get("TRYON_QUERY_HELPER", "1").strip() != "0"
+    from engine.settings import current
+
+    return current().query_helper
 
 
 def _thread(jobs: Queue) -> None:

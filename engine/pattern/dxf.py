@@ -1,23 +1,18 @@
-"""Cutting patterns as DXF files, the way pattern CAD systems exchange them (ASTM D6673 / AAMA).
+"""Cutting patterns as DXF files, the way pattern CAD systems exchange them (ASTM D6673 / AAMA):
+import into a GarmentCode specification (`import_pattern`), export (`write_dxf`).
 
-Reading (`read_dxf` -> pieces, `import_dxf` -> a PatternSpec):
-- a piece is a DXF block inserted in the drawing; its boundary is the closed polyline on layer
-  "1" (the largest, if several); its corners are the POINTs on layer "2" (turn points). A
-  drawing without blocks gives one piece per closed polyline. Without turn points, a vertex
-  where the outline turns by more than CORNER_DEG is a corner.
-- the name is the piece's "Piece Name:" text, else the block's name; "Quantity: N" is noted.
-- units: --units, else the style text "Units: METRIC" (mm) / "ENGLISH" (inches), else the
-  header's $INSUNITS (mm, cm, m, in; often a CAD default, so second); a file that says none is refused (guessing inches for centimetres makes a
-  garment 2.5x too large).
-- between two corners the outline becomes one edge: straight when no point is more than
-  STRAIGHT_TOL off the chord, else the cubic Bezier that fits it within FIT_TOL (split in two
-  where one cubic does not).
-
-The standard "is not intended to represent the relationships between pattern pieces", so a DXF
-has no seams and no 3D placement. Those come from an assembly file (JSON, see `Assembly`):
-stitches between {panel, edge} (edge numbers as in the imported pattern's SVG), each panel's
-GarmentCode translation/rotation (cm, degrees), copies of pieces cut twice (mirrored), and the
-optional `tryon` block. Without one, the import writes the panels alone and says what is missing.
+Reading is engine.pattern.dxf_read (every piece in every graded size, every layer). A pattern
+is imported in one of its sizes (`default_size`: the file's sample size, else the middle one):
+- without an assembly file, the garment is inferred (engine.pattern.dxf_infer: the pieces'
+  roles, the seams, where each piece goes on the body) and built edge by edge
+  (engine.pattern.dxf_build); `Imported.assembly` is that inference as an assembly file, which a
+  user can correct and give back;
+- with one, the assembly says it. Two kinds: the inferred kind (`panels` with `piece` and `role`;
+  `seams`, each two spans of panel outlines from [corner, fraction of the way to the next
+  corner] to another, the corners as numbered in pattern.svg -- the same in every size, so one
+  assembly serves all sizes), or GarmentCode's placement (`panels` with `translation` (cm) and
+  `rotation` (degrees) of each piece, `copy_of` for a piece cut twice, `stitches` by {panel,
+  edge}; the piece's edges run between its corners, dxf_read.corners_of).
 
 Writing (`write_dxf`): each panel a block (boundary on layer 1, turn points on layer 2, piece
 name and quantity as text), in millimetres ($INSUNITS = 4, "Units: METRIC").
@@ -31,24 +26,27 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from typing import Literal
+
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from engine.errors import InputError
 from engine.pattern import geometry as geo
+from engine.pattern.dxf_build import build_spec, fit_tol, section_edges
+from engine.pattern.dxf_infer import BAND_ROLES, Inference, Part, Seam, Span, frame_part, hints_of, infer
+from engine.pattern.dxf_read import DxfPattern, corners_of, read_pattern
 from engine.pattern.spec import PatternSpec, StitchSide, TryonExtension
 
-CORNER_DEG = 30.0  # without turn points: the outline turning more than this at a vertex is a corner
-STRAIGHT_TOL = 0.02  # cm: a section no further than this off its chord is a straight edge
-FIT_TOL = 0.1  # cm: a curved section is one cubic edge when the cubic is this close to it
-TURN_SNAP = 0.05  # cm: a turn point this close to an outline vertex marks it (else the nearest is split in)
-MAX_PIECE_CM = 400.0  # a piece longer than this (after units) is a units mistake
-MIN_PIECE_CM = 3.0  # (a belt loop)
-UNITS_CM = {"mm": 0.1, "cm": 1.0, "m": 100.0, "in": 2.54}
-_INSUNITS = {1: "in", 4: "mm", 5: "cm", 6: "m"}
+AREA_SAMPLES = 64  # points per edge when a panel's area is measured against its piece's
+
+
+# ------------------------------------------------------------------ pieces (one size)
 
 
 @dataclass
 class Piece:
+    """One piece in one size, as GarmentCode's placement path uses it."""
+
     name: str
     outline: np.ndarray  # (M, 2) cm, closed (first point not repeated), in the piece's own frame
     corners: list[int]  # indices into outline, ascending
@@ -56,263 +54,45 @@ class Piece:
     notes: list[str] = field(default_factory=list)
 
 
-# ------------------------------------------------------------------ reading
+def default_size(pattern: DxfPattern) -> str:
+    """The size a pattern is imported in when none is asked for: its sample size, else the middle one."""
+    return pattern.sample_size or pattern.sizes[len(pattern.sizes) // 2]
 
 
-def _units(doc, units: str | None, texts: list[str], source: str) -> float:
-    if units is not None:
-        if units not in UNITS_CM:
-            raise InputError(f"units '{units}': use one of {', '.join(UNITS_CM)}")
-        return UNITS_CM[units]
-    for t in texts:  # the standard's own statement first ($INSUNITS is often a CAD default)
-        m = re.match(r"\s*units\s*:\s*(\w+)", t, re.I)
-        if m:
-            word = m.group(1).lower()
-            if word in ("metric", "mm"):
-                return UNITS_CM["mm"]
-            if word in ("english", "inch", "inches", "imperial"):
-                return UNITS_CM["in"]
-            if word in UNITS_CM:
-                return UNITS_CM[word]
-    code = int(doc.header.get("$INSUNITS", 0) or 0)
-    if code in _INSUNITS:
-        return UNITS_CM[_INSUNITS[code]]
-    raise InputError(f"{source}: the DXF does not say its units (no $INSUNITS in its header, no 'Units:' text); "
-                     "give them: --units mm, cm, m or in")
+def pick_size(pattern: DxfPattern, size: str | None) -> str:
+    if size is None:
+        return default_size(pattern)
+    if size not in pattern.sizes:
+        raise InputError(f"{pattern.source}: no size '{size}'; its sizes are {', '.join(pattern.sizes)}")
+    return size
 
 
-def _text_of(e) -> str | None:
-    t = e.dxftype()
-    if t == "TEXT":
-        return e.dxf.text
-    if t == "MTEXT":
-        return e.plain_text()
-    return None
-
-
-def _layer(e) -> str:
-    return str(e.dxf.layer).strip()
-
-
-def _closed_polylines(entities) -> list[np.ndarray]:
-    """(K, 2) point lists of the closed (or end-to-start) polylines among entities, curves
-    (bulges, splines) flattened to 0.1 units."""
-    from ezdxf import path as dxfpath
-
+def read_dxf(path: str | Path, units: str | None = None, size: str | None = None) -> list[Piece]:
+    """The pattern's pieces in one size (default_size), outlines in cm, with their corners."""
+    pattern = read_pattern(path, units)
+    size = pick_size(pattern, size)
     out = []
-    for e in entities:
-        if e.dxftype() not in ("LWPOLYLINE", "POLYLINE", "SPLINE"):
-            continue
-        try:
-            p = dxfpath.make_path(e)
-            pts = np.array([(v.x, v.y) for v in p.flattening(0.1)], dtype=np.float64)
-        except Exception:  # an entity ezdxf cannot turn into a path (3D mesh polylines, ...)
-            continue
-        if len(pts) < 3:
-            continue
-        closed = bool(getattr(e, "closed", False) or getattr(e, "is_closed", False))
-        if not closed and np.linalg.norm(pts[0] - pts[-1]) > 1e-6 * max(1.0, np.abs(pts).max()):
-            continue
-        if np.linalg.norm(pts[0] - pts[-1]) <= 1e-9 * max(1.0, np.abs(pts).max()):
-            pts = pts[:-1]
-        keep = np.ones(len(pts), dtype=bool)  # drop repeated points
-        keep[1:] = np.linalg.norm(np.diff(pts, axis=0), axis=1) > 1e-9
-        out.append(pts[keep])
-    return out
-
-
-def _piece_from(name: str, entities, to_cm: float) -> Piece | None:
-    ents = list(entities)
-    boundary = [e for e in ents if _layer(e) == "1"]
-    polys = _closed_polylines(boundary) or _closed_polylines(ents)
-    if not polys:
-        return None
-    notes = []
-    if len(polys) > 1:
-        notes.append(f"{len(polys)} closed outlines; the largest is the piece's boundary")
-    poly = max(polys, key=lambda p: abs(geo.signed_area(p))) * to_cm
-    quantity = 1
-    for e in ents:
-        t = _text_of(e)
-        if not t:
-            continue
-        m = re.match(r"\s*piece\s*name\s*:\s*(.+?)\s*$", t, re.I)
-        if m:
-            name = m.group(1)
-        m = re.match(r"\s*quantity\s*:\s*(\d+)", t, re.I)
-        if m:
-            quantity = int(m.group(1))
-    turn = np.array([(e.dxf.location.x, e.dxf.location.y) for e in ents
-                     if e.dxftype() == "POINT" and _layer(e) == "2"], dtype=np.float64).reshape(-1, 2) * to_cm
-    poly, corners = _mark_corners(poly, turn)
-    return Piece(name=name, outline=poly, corners=corners, quantity=quantity, notes=notes)
-
-
-def _mark_corners(poly: np.ndarray, turn: np.ndarray) -> tuple[np.ndarray, list[int]]:
-    """The outline with its corners: the turn points (each snapped to its outline vertex, or
-    inserted on the nearest segment), else the vertices where the outline turns sharply."""
-    poly = poly.copy()
-    marked: list[np.ndarray] = []
-    for t in turn:
-        d = np.linalg.norm(poly - t, axis=1)
-        if d.min() <= TURN_SNAP:
-            marked.append(poly[int(d.argmin())])
-            continue
-        a, b = poly, np.roll(poly, -1, axis=0)  # the nearest segment, if the point is on the outline
-        ab = b - a
-        s = np.clip(((t - a) * ab).sum(1) / np.maximum((ab * ab).sum(1), 1e-18), 0, 1)
-        dist = np.linalg.norm(a + s[:, None] * ab - t, axis=1)
-        k = int(dist.argmin())
-        if dist[k] <= TURN_SNAP:
-            poly = np.insert(poly, k + 1, t, axis=0)
-            marked.append(t)
-    if marked:
-        idx = sorted({int(np.linalg.norm(poly - m, axis=1).argmin()) for m in marked})
-    else:
-        prev, nxt = poly - np.roll(poly, 1, axis=0), np.roll(poly, -1, axis=0) - poly
-        cosang = (prev * nxt).sum(1) / np.maximum(np.linalg.norm(prev, axis=1) * np.linalg.norm(nxt, axis=1), 1e-18)
-        idx = list(np.flatnonzero(cosang < np.cos(np.radians(CORNER_DEG))))
-    if len(idx) < 2:  # a round piece (no corners): four edges of equal length
-        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(np.vstack([poly, poly[:1]]), axis=0), axis=1))])
-        start, total = (idx[0] if idx else 0), s[-1]
-        s = (s[:-1] - s[start]) % total  # arc length from the start corner
-        idx = sorted({start} | {int(np.abs(s - q * total).argmin()) for q in (0.25, 0.5, 0.75)})
-    return poly, [int(i) for i in idx]
-
-
-def read_dxf(path: str | Path, units: str | None = None) -> list[Piece]:
-    """The pattern pieces of a DXF file (outlines in cm); InputError on anything unusable."""
-    import ezdxf
-    from ezdxf import recover
-
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"DXF file not found: {path}")
-    if path.stat().st_size == 0:
-        raise InputError(f"{path.name}: empty file")
-    try:
-        doc, auditor = recover.readfile(str(path))
-    except (IOError, ezdxf.DXFStructureError, UnicodeDecodeError) as e:
-        raise InputError(f"{path.name}: not a readable DXF file ({e})") from None
-    if auditor.has_errors:
-        raise InputError(f"{path.name}: the DXF is damaged ({len(auditor.errors)} error(s), e.g. "
-                         f"{auditor.errors[0].message}); export it again from the pattern software")
-    msp = doc.modelspace()
-    texts = [t for t in (_text_of(e) for e in msp) if t]
-    to_cm = _units(doc, units, texts, path.name)
-    pieces: list[Piece] = []
-    inserted = set()
-    for ins in msp.query("INSERT"):
-        name = ins.dxf.name
-        if name in inserted or name.startswith("*"):
-            continue
-        block = doc.blocks.get(name)
-        if block is None:
-            continue
-        inserted.add(name)
-        p = _piece_from(name, block, to_cm)
-        if p is not None:
-            pieces.append(p)
-    if not pieces:  # a plain drawing: each closed polyline is a piece, in its own frame
-        for k, poly in enumerate(_closed_polylines(msp)):
-            poly = (poly - poly.min(axis=0)) * to_cm
-            poly, corners = _mark_corners(poly, np.zeros((0, 2)))
-            pieces.append(Piece(name=f"piece{k + 1}", outline=poly, corners=corners))
-    if not pieces:
-        raise InputError(f"{path.name}: no pattern pieces found (no closed polyline, in a block or in the drawing)")
     seen: dict[str, int] = {}
-    for p in pieces:
-        size = float(np.ptp(p.outline, axis=0).max())
-        if not MIN_PIECE_CM <= size <= MAX_PIECE_CM:
-            raise InputError(f"{path.name}: piece '{p.name}' is {size:.1f} cm across, which is no garment piece: "
-                             "are the units right? (give them with --units mm, cm, m or in)")
+    for p in pattern.pieces:
+        if size not in p.shapes:
+            continue
+        outline, corners = corners_of(p, size)
         base = re.sub(r"[^\w.-]+", "_", p.name.strip()) or "piece"
         seen[base] = seen.get(base, 0) + 1
-        p.name = base if seen[base] == 1 else f"{base}_{seen[base]}"
-    return pieces
-
-
-# ------------------------------------------------------------------ outline -> edges
-
-
-def fit_cubic(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """The cubic Bezier from pts[0] to pts[-1] closest to the points (least squares, chord-length
-    parameters refined by projection): (c1, c2, max distance of the points from it)."""
-    s, e = pts[0], pts[-1]
-    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-    t = np.concatenate([[0.0], np.cumsum(seg)]) / max(seg.sum(), 1e-18)
-    dense_t = np.linspace(0.0, 1.0, 1001)
-    best = (s + (e - s) / 3, s + 2 * (e - s) / 3, np.inf)
-    for _ in range(40):  # alternate: control points for these parameters, parameters by projection
-        b1, b2 = 3 * (1 - t) ** 2 * t, 3 * (1 - t) * t ** 2
-        rhs = pts - ((1 - t) ** 3)[:, None] * s - (t ** 3)[:, None] * e
-        (c1, c2), *_ = np.linalg.lstsq(np.stack([b1, b2], axis=1), rhs, rcond=None)
-        curve = geo.bezier3(s, c1, c2, e, dense_t)
-        d = np.linalg.norm(pts[:, None, :] - curve[None, :, :], axis=2)
-        err = float(d.min(axis=1).max())
-        if err < best[2]:
-            best = (c1, c2, err)
-        if err < FIT_TOL / 10:
-            break
-        t = dense_t[d.argmin(axis=1)]
-        t[0], t[-1] = 0.0, 1.0
-    return best
-
-
-def _fit_arc(pts: np.ndarray) -> dict | None:
-    """GarmentCode's circle curvature for a section that is a circular arc within FIT_TOL (the
-    circle through its ends and its middle point), else None."""
-    s, e = pts[0], pts[-1]
-    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-    arc_s = np.concatenate([[0.0], np.cumsum(seg)])
-    m = pts[int(np.abs(arc_s - arc_s[-1] / 2).argmin())]
-    a, b = m - s, e - s
-    cross = a[0] * b[1] - a[1] * b[0]
-    if abs(cross) < 1e-12:
-        return None
-    aa, bb = a @ a, b @ b  # circumcentre of s, m, e (relative to s)
-    cx = (b[1] * aa - a[1] * bb) / (2 * cross)
-    cy = (a[0] * bb - b[0] * aa) / (2 * cross)
-    centre = s + np.array([cx, cy])
-    r = float(np.hypot(cx, cy))
-    if np.abs(np.linalg.norm(pts - centre, axis=1) - r).max() > FIT_TOL:
-        return None
-    side_m = -cross  # > 0: the middle lies left of start -> end, < 0: right
-    side_c = b[0] * cy - b[1] * cx
-    right = side_m < 0
-    large = bool(side_m * side_c > 0)  # the middle on the same side of the chord as the centre
-    return {"type": "circle", "params": [r, int(large), int(right)]}
-
-
-def _section_edges(pts: np.ndarray) -> list[tuple[np.ndarray, dict | None]]:
-    """[(end point, curvature or None)] for one outline section between two corners."""
-    s, e = pts[0], pts[-1]
-    chord = e - s
-    L = float(np.linalg.norm(chord))
-    if len(pts) == 2 or L == 0:
-        return [(e, None)]
-    off = np.abs((pts[:, 0] - s[0]) * chord[1] - (pts[:, 1] - s[1]) * chord[0]) / L
-    if off.max() <= STRAIGHT_TOL:
-        return [(e, None)]
-    arc = _fit_arc(pts)
-    if arc is not None:
-        return [(e, arc)]
-    c1, c2, err = fit_cubic(pts)
-    if err <= FIT_TOL or len(pts) < 5:
-        return [(e, {"type": "cubic", "params": [list(geo.to_relative(s, e, c1)), list(geo.to_relative(s, e, c2))]})]
-    mid = len(pts) // 2
-    first = _section_edges(pts[: mid + 1])
-    return first + _section_edges(pts[mid:])
+        out.append(Piece(name=base if seen[base] == 1 else f"{base}_{seen[base]}", outline=outline, corners=corners,
+                         quantity=p.cut, notes=list(p.notes)))
+    return out
 
 
 def piece_to_panel(piece: Piece) -> dict:
     """A GarmentCode panel dict (cm, relative curvature) from a piece's outline and corners."""
     poly, c = piece.outline, piece.corners
+    tol = fit_tol(poly)
     verts, edges = [poly[c[0]]], []
     for k in range(len(c)):
         a, b = c[k], c[(k + 1) % len(c)]
         sec = poly[a: b + 1] if b > a else np.vstack([poly[a:], poly[: b + 1]])
-        parts = _section_edges(sec)
+        parts = section_edges(sec, tol)
         for j, (end, curv) in enumerate(parts):
             i = len(verts) - 1
             closing = k == len(c) - 1 and j == len(parts) - 1  # back to the first corner
@@ -327,14 +107,41 @@ def piece_to_panel(piece: Piece) -> dict:
 
 
 class PanelAssembly(BaseModel):
-    """Where one panel goes (GarmentCode's translation in cm, rotation in degrees, intrinsic XYZ),
-    and, for a piece cut twice, which piece it copies (mirrored left-right by default)."""
+    """One panel: either a piece in an inferred role (`piece`, `role`, `side`, `pair`, `stretch`)
+    or, GarmentCode's way, where the piece goes (translation in cm, rotation in
+    degrees, intrinsic XYZ) and, for a piece cut twice, which piece it copies (mirrored
+    left-right by default)."""
 
     model_config = ConfigDict(extra="forbid")
+    piece: str | None = None  # the DXF piece (by its "Piece Name:")
+    role: str | None = None  # front, back, sleeve, leg, collar, cuff, waistband, binding
+    side: str | None = None  # left / right (sleeves, legs, cuffs)
+    pair: bool = False  # the second of a pair cut twice (the fabric's other face out)
+    stretch: float = Field(1.0, gt=0.2, lt=5.0)  # a band lengthened for the drape (a rib)
     copy_of: str | None = None
     mirror: bool = True  # only for a copy
     translation: tuple[float, float, float] = (0.0, 0.0, 0.0)
     rotation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+class SpanAssembly(BaseModel):
+    """A stretch of a panel's outline: from [corner, fraction of the way to the next corner] to
+    another, forward (dir 1: the way the corners are numbered) or backward (-1)."""
+
+    model_config = ConfigDict(extra="forbid")
+    panel: str
+    start: tuple[int, float]
+    end: tuple[int, float]
+    dir: Literal[1, -1] = 1
+
+
+class SeamAssembly(BaseModel):
+    """Two spans sewn together, start to start."""
+
+    model_config = ConfigDict(extra="forbid")
+    label: str = ""
+    a: SpanAssembly
+    b: SpanAssembly
 
 
 class Assembly(BaseModel):
@@ -342,9 +149,15 @@ class Assembly(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     panels: dict[str, PanelAssembly] = Field(default_factory=dict)
-    stitches: list[tuple[StitchSide, StitchSide]] = Field(default_factory=list)
+    seams: list[SeamAssembly] = Field(default_factory=list)  # the inferred kind
+    stitches: list[tuple[StitchSide, StitchSide]] = Field(default_factory=list)  # GarmentCode's kind
     panel_order: list[str] | None = None  # the order the panels are meshed in (default: the DXF's, then copies)
     tryon: TryonExtension | None = None
+    size: str | None = None  # the size it was inferred in (any size of the pattern takes it)
+
+    @property
+    def inferred_kind(self) -> bool:
+        return any(p.role is not None for p in self.panels.values())
 
 
 def load_assembly(path: str | Path) -> Assembly:
@@ -355,6 +168,10 @@ def load_assembly(path: str | Path) -> Assembly:
         data = json.loads(path.read_bytes())
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise InputError(f"{path.name}: not valid JSON ({e})") from None
+    return parse_assembly(data, path.name)
+
+
+def parse_assembly(data, source: str = "assembly") -> Assembly:
     if isinstance(data, dict) and isinstance(data.get("stitches"), list):  # [panel, edge] pairs allowed
         data["stitches"] = [[{"panel": s[0], "edge": s[1]} if isinstance(s, list) and len(s) == 2 else s
                              for s in pair] if isinstance(pair, list) else pair for pair in data["stitches"]]
@@ -363,21 +180,184 @@ def load_assembly(path: str | Path) -> Assembly:
     except ValidationError as e:
         errs = e.errors()
         parts = [f"{'.'.join(str(x) for x in err['loc'])}: {err['msg']}" for err in errs[:3]]
-        raise InputError(f"{path.name}: invalid assembly: " + "; ".join(parts)) from None
+        raise InputError(f"{source}: invalid assembly: " + "; ".join(parts)) from None
 
 
-def import_dxf(path: str | Path, assembly: Assembly | None = None, units: str | None = None) -> tuple[PatternSpec, list[str]]:
-    """(PatternSpec, notes) from a DXF and its assembly."""
-    pieces = read_dxf(path, units)
-    name = Path(path).name
-    panels = {p.name: piece_to_panel(p) for p in pieces}
-    notes = [f"{p.name}: {n}" for p in pieces for n in p.notes]
-    asm = assembly or Assembly()
+# ------------------------------------------------------------------ import
+
+
+@dataclass
+class Imported:
+    """A DXF pattern imported in one size."""
+
+    pattern: DxfPattern
+    size: str
+    spec: PatternSpec
+    labels: list[str]  # what each stitch sews
+    notes: list[str]
+    unsure: list[str] = field(default_factory=list)
+    left_out: list[str] = field(default_factory=list)
+    kind: str = "pieces"  # top, bottom, pieces (nothing sewn)
+    assembly: dict | None = None  # the inferred assembly (None when one was given)
+    areas: dict[str, tuple[float, float]] = field(default_factory=dict)  # panel -> (its area, its piece's) cm^2
+    parts: list[Part] = field(default_factory=list)
+    seams: list[Seam] = field(default_factory=list)
+
+    def svg(self) -> str:
+        """pattern.svg: the panels with their seams numbered (engine.pattern.dxf_svg)."""
+        from engine.pattern.dxf_svg import imported_svg
+
+        if not self.parts:  # nothing inferred: the pieces as they are, every edge numbered
+            from engine.pattern.io import pattern_to_svg
+
+            return pattern_to_svg(self.spec, edge_numbers=True)
+        title = (f"{self.pattern.source}, size {self.size} of {', '.join(self.pattern.sizes)} -- "
+                 f"{self.kind}; seams:")
+        notes = [f"left out: {x}" for x in self.left_out] + [f"unsure: {x}" for x in self.unsure]
+        return imported_svg(self.parts, self.seams, title, notes)
+
+
+def import_pattern(path: str | Path, size: str | None = None, units: str | None = None,
+                   assembly: Assembly | None = None, pattern: DxfPattern | None = None) -> Imported:
+    """A DXF pattern in one size as a GarmentCode spec: inferred, or as the assembly says."""
+    pattern = pattern or read_pattern(path, units)
+    size = pick_size(pattern, size if size is not None else (assembly.size if assembly is not None else None))
+    if assembly is not None and not assembly.inferred_kind:
+        spec, notes = _placed_import(pattern, size, assembly)
+        return Imported(pattern, size, spec, [""] * len(spec.pattern.stitches), notes)
+    if assembly is not None:
+        parts = [_part_of(pattern, size, name, pa) for name, pa in assembly.panels.items()]
+        seams = [_seam_of(parts, sa) for sa in assembly.seams]
+        spec, labels, _ = build_spec(parts, seams, hints_of(parts), assembly.tryon.fabric if assembly.tryon else None)
+        out = Imported(pattern, size, spec, labels, ["assembled as the assembly file says"], kind="assembled",
+                       parts=parts, seams=seams)
+    else:
+        inf = infer(pattern, size)
+        if inf.kind == "pieces":
+            spec, labels = _pieces_spec(pattern, size), []
+        else:
+            spec, labels, _ = build_spec(inf.parts, inf.seams, hints_of(inf.parts))
+        out = Imported(pattern, size, spec, labels, inf.notes, inf.unsure, inf.left_out, inf.kind)
+        if inf.kind != "pieces":
+            out.assembly = assembly_of_inferred(inf, size)
+            out.parts, out.seams = inf.parts, inf.seams
+        parts = inf.parts
+    out.areas = _areas(out.spec, parts, pattern, size)
+    return out
+
+
+def import_dxf(path: str | Path, assembly: Assembly | None = None, units: str | None = None,
+               size: str | None = None) -> tuple[PatternSpec, list[str]]:
+    """(PatternSpec, notes) from a DXF (and its assembly, if given)."""
+    imp = import_pattern(path, size, units, assembly)
+    return imp.spec, imp.notes + [f"unsure: {u}" for u in imp.unsure] + imp.left_out
+
+
+def _areas(spec: PatternSpec, parts: list[Part], pattern: DxfPattern, size: str) -> dict:
+    """Each panel's area against its piece's cut line (the file's chained layer 1, twice where
+    the piece is cut on the fold and unfolded; bands as lengthened for the drape)."""
+    out = {}
+    for p in parts:
+        panel = spec.pattern.panels[p.name]
+        area = abs(geo.signed_area(geo.outline(panel, 1.0, True, AREA_SAMPLES)))
+        file_area = pattern.piece(p.piece).shapes[size].area * (2 if p.unfolded else 1) * p.stretch
+        out[p.name] = (area, file_area)
+    return out
+
+
+def _part_of(pattern: DxfPattern, size: str, name: str, pa: PanelAssembly) -> Part:
+    if pa.piece is None or pa.role is None:
+        raise InputError(f"assembly: panel '{name}' needs both `piece` and `role` (or neither, with translation "
+                         "and rotation)")
+    piece = pattern.piece(pa.piece)
+    if size not in piece.shapes:
+        raise InputError(f"assembly: piece '{pa.piece}' is not graded in size {size}")
+    roles = ("front", "back", "sleeve", "leg", *BAND_ROLES)
+    if pa.role not in roles:
+        raise InputError(f"assembly: panel '{name}': role '{pa.role}'; use one of {', '.join(roles)}")
+    return frame_part(name, piece, size, pa.role, pa.side, pa.pair, pa.stretch)
+
+
+def _corner_arcs(part: Part) -> tuple[list[float], float]:
+    from engine.pattern.dxf_infer import _arc
+
+    arc = _arc(part.outline)
+    return [float(arc[c]) for c in part.corners], float(arc[-1])
+
+
+def _pos(part: Part, at: tuple[int, float]) -> float:
+    """Arc position of [corner, fraction of the way to the next corner]."""
+    cs, total = _corner_arcs(part)
+    k, f = at
+    if not 0 <= k < len(cs) or not 0.0 <= f <= 1.0:
+        raise InputError(f"assembly: panel '{part.name}': [{k}, {f}] is not [corner 0..{len(cs) - 1}, fraction 0..1]")
+    nxt = cs[k + 1] if k + 1 < len(cs) else cs[0] + total
+    return (cs[k] + f * (nxt - cs[k])) % total
+
+
+def _at(part: Part, s: float) -> list:
+    """[corner, fraction] of arc position s (the inverse of _pos)."""
+    cs, total = _corner_arcs(part)
+    s = s % total
+    k = max((i for i, c in enumerate(cs) if c <= s + 1e-9), default=len(cs) - 1)
+    nxt = cs[k + 1] if k + 1 < len(cs) else cs[0] + total
+    s = s + total if s < cs[k] - 1e-9 else s
+    return [k, round(min(float((s - cs[k]) / max(nxt - cs[k], 1e-12)), 1.0), 6)]
+
+
+def _seam_of(parts: list[Part], sa: SeamAssembly) -> Seam:
+    by = {p.name: p for p in parts}
+    spans = []
+    for side in (sa.a, sa.b):
+        if side.panel not in by:
+            raise InputError(f"assembly: seam '{sa.label}' names panel '{side.panel}', which is not one of "
+                             f"{', '.join(by)}")
+        p = by[side.panel]
+        spans.append(Span(p.name, _pos(p, side.start), _pos(p, side.end), side.dir))
+    return Seam(spans[0], spans[1], sa.label)
+
+
+def assembly_of_inferred(inf: Inference, size: str) -> dict:
+    """The inference as an assembly file (see PanelAssembly, SeamAssembly): what a user corrects
+    and gives back; its corner numbers are those of pattern.svg."""
+    panels = {}
+    for p in inf.parts:
+        entry = {"piece": p.piece, "role": p.role}
+        entry |= {"side": p.side} if p.side else {}
+        entry |= {"pair": True} if p.pair else {}
+        entry |= {"stretch": round(p.stretch, 6)} if p.stretch != 1.0 else {}
+        panels[p.name] = entry
+    by = {p.name: p for p in inf.parts}
+    seams = [{"label": s.label, **{k: {"panel": sp.part, "start": _at(by[sp.part], sp.s0),
+                                       "end": _at(by[sp.part], sp.s1), "dir": sp.dir}
+                                   for k, sp in (("a", s.a), ("b", s.b))}} for s in inf.seams]
+    return {"size": size, "panels": panels, "seams": seams, "panel_order": [p.name for p in inf.parts]}
+
+
+def _pieces_spec(pattern: DxfPattern, size: str) -> PatternSpec:
+    """Every piece of the size as a panel, nothing sewn (no garment could be inferred)."""
+    pieces = [Piece(name=p.name, outline=o, corners=c, quantity=p.cut)
+              for p in pattern.pieces if size in p.shapes for o, c in [corners_of(p, size)]]
+    return PatternSpec.model_validate({
+        "pattern": {"panels": {p.name: piece_to_panel(p) for p in pieces}, "stitches": []},
+        "properties": {"units_in_meter": 100, "curvature_coords": "relative"}})
+
+
+def _placed_import(pattern: DxfPattern, size: str, asm: Assembly) -> tuple[PatternSpec, list[str]]:
+    """GarmentCode's way: the pieces between their corners, copies, translation and rotation."""
+    pieces = {}
+    for p in pattern.pieces:
+        if size in p.shapes:
+            outline, corners = corners_of(p, size)
+            pieces[p.name] = Piece(name=p.name, outline=outline, corners=corners, quantity=p.cut)
+    name = pattern.source
+    panels = {n: piece_to_panel(p) for n, p in pieces.items()}
+    notes = []
     for pname, pa in asm.panels.items():
         if pa.copy_of is not None:
             if pa.copy_of not in panels:
                 raise InputError(f"assembly: panel '{pname}' copies '{pa.copy_of}', which is not in {name} "
-                                 f"(its pieces: {', '.join(p.name for p in pieces)})")
+                                 f"(its pieces: {', '.join(pieces)})")
             if pname in panels:
                 raise InputError(f"assembly: panel '{pname}' is already a piece of {name}; name the copy otherwise")
             src = json.loads(json.dumps(panels[pa.copy_of]))
@@ -394,17 +374,14 @@ def import_dxf(path: str | Path, assembly: Assembly | None = None, units: str | 
             panels[pname] = src
         elif pname not in panels:
             raise InputError(f"assembly: panel '{pname}' is not in {name} (its pieces: "
-                             f"{', '.join(p.name for p in pieces)}); a copy of a piece needs copy_of")
+                             f"{', '.join(pieces)}); a copy of a piece needs copy_of")
         panels[pname]["translation"] = list(pa.translation)
         panels[pname]["rotation"] = list(pa.rotation)
-    for p in pieces:
+    for p in pieces.values():
         copies = sum(1 for pa in asm.panels.values() if pa.copy_of == p.name)
         if p.quantity > 1 + copies:
             notes.append(f"{p.name}: cut {p.quantity} times; the assembly places {1 + copies} "
                          "(add copies with copy_of)")
-    if assembly is None:
-        notes.append("no assembly file: the panels have no stitches and no placement yet; write one "
-                     "(stitches by panel and edge number, as in the SVG) and import again with --assembly")
     spec = PatternSpec.model_validate({
         "pattern": {"panels": panels, "stitches": [[a.model_dump(), b.model_dump()] for a, b in asm.stitches],
                     "panel_order": _order(asm.panel_order, panels)},
@@ -422,6 +399,57 @@ def _order(order: list[str] | None, panels: dict) -> list[str]:
         raise InputError(f"assembly: panel_order names {', '.join(unknown)}, not a panel of the pattern "
                          f"({', '.join(panels)})")
     return list(order) + [n for n in panels if n not in order]
+
+
+def piece_areas(pattern: DxfPattern, sizes: list[str] | None = None) -> dict[tuple[str, str], tuple[float, float]]:
+    """(piece, size) -> (the area of its panel between its corners, the shoelace area of its
+    chained layer-1 cut line), cm^2, for every piece in every size (or those of `sizes`)."""
+    out = {}
+    for p in pattern.pieces:
+        for size in (s for s in p.shapes if sizes is None or s in sizes):
+            outline, corners = corners_of(p, size)
+            panel = PatternSpec.model_validate({"pattern": {"panels": {"p": piece_to_panel(
+                Piece(p.name, outline, corners))}}}).pattern.panels["p"]
+            out[(p.name, size)] = (abs(geo.signed_area(geo.outline(panel, 1.0, True, AREA_SAMPLES))),
+                                   p.shapes[size].area)
+    return out
+
+
+# ------------------------------------------------------------------ summary
+
+
+def summary(pattern: DxfPattern, imported: Imported | None = None) -> dict:
+    """What `tryon pattern import --json` prints: units, sizes, pieces (quantity, cut, category,
+    per size area cm^2, perimeter cm, notches, grain line), layers, and the garment inferred."""
+    from engine.pattern.dxf_read import KNOWN_LAYERS
+
+    pieces = []
+    for p in pattern.pieces:
+        per = {}
+        for size in pattern.sizes:
+            sh = p.shapes.get(size)
+            if sh is not None:
+                per[size] = {"area_cm2": round(sh.file_area, 2),
+                             "perimeter_cm": round(float(geo.polyline_length(np.vstack([sh.outline, sh.outline[:1]]))), 2),
+                             "notches": int(len(sh.notches)), "grain_line": sh.grain is not None,
+                             "drill_holes": int(len(sh.drills)), "internal_lines": len(sh.internal),
+                             "mirror_line": bool(sh.mirror), "sew_line": sh.sew is not None,
+                             **({"sew_line_area_cm2": round(sh.area, 2)} if sh.sew is not None else {})}
+        pieces.append({"name": p.name, "quantity": p.quantity, "cut": p.cut, "category": p.category,
+                       "annotation": p.annotation, "fabric": p.fabric, "sizes": per, "notes": p.notes})
+    out = {"file": pattern.source, "style": pattern.style, "units": pattern.units, "units_note": pattern.units_note,
+           "sizes": pattern.sizes, "sample_size": pattern.sample_size, "pieces": pieces,
+           "layers": {k: {"entities": n, "meaning": KNOWN_LAYERS.get(k, "not in the standard: kept, not used")}
+                      for k, n in sorted(pattern.layers.items(), key=lambda kv: (len(kv[0]), kv[0]))},
+           "notes": pattern.notes}
+    if imported is not None:
+        out["garment"] = {"size": imported.size, "kind": imported.kind,
+                          "panels": list(imported.spec.pattern.panels),
+                          "seams": sorted(set(imported.labels) - {""}), "stitches": len(imported.spec.pattern.stitches),
+                          "notes": imported.notes, "unsure": imported.unsure, "left_out": imported.left_out,
+                          "area_vs_cut_line_pct": {n: round(100 * (a / f - 1), 3) for n, (a, f) in
+                                                   imported.areas.items()}}
+    return out
 
 
 # ------------------------------------------------------------------ writing

@@ -56,8 +56,9 @@ def _circle_dense(start: np.ndarray, end: np.ndarray, radius: float, large_arc: 
 
 def edge_dense(panel: Panel, edge: Edge, scale: float, relative: bool = True, n: int = _DENSE) -> np.ndarray:
     """(n, 2) points along the edge from its first to its second endpoint (not uniform)."""
-    v = np.asarray(panel.vertices, dtype=np.float64) * scale
-    s, e = v[edge.endpoints[0]], v[edge.endpoints[1]]
+    # the two endpoints only: converting every vertex per edge made a panel's outline O(edges^2)
+    s = np.asarray(panel.vertices[edge.endpoints[0]], dtype=np.float64) * scale
+    e = np.asarray(panel.vertices[edge.endpoints[1]], dtype=np.float64) * scale
     c = edge.curvature
     if c is None:
         return np.stack([s, e])
@@ -126,3 +127,17 @@ def place_2d(points: np.ndarray, panel: Panel, scale: float) -> np.ndarray:
     translation/rotation (GarmentCode placement)."""
     p3 = np.concatenate([points, np.zeros((len(points), 1))], axis=1)
     return p3 @ panel_rotation_matrix(panel.rotation).T + np.asarray(panel.translation) * scale
+
+
+def row_extent(outline: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(u min, u max) of a closed outline (M, 2) along the horizontal lines at heights v (K,)
+    (0 where a line misses it)."""
+    a, c = outline, np.roll(outline, -1, axis=0)
+    vv = np.asarray(v, dtype=np.float64)[:, None]
+    cross = (a[None, :, 1] - vv) * (c[None, :, 1] - vv) <= 0
+    rise = np.where(c[:, 1] != a[:, 1], c[:, 1] - a[:, 1], 1.0)
+    t = np.clip((vv - a[None, :, 1]) / rise[None, :], 0, 1)
+    xs = a[None, :, 0] + t * (c[None, :, 0] - a[None, :, 0])
+    lo = np.where(cross, xs, np.inf).min(axis=1)
+    hi = np.where(cross, xs, -np.inf).max(axis=1)
+    return np.where(np.isfinite(lo), lo, 0.0), np.where(np.isfinite(hi), hi, 0.0)

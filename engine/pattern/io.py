@@ -8,13 +8,14 @@ from pathlib import Path
 import numpy as np
 from pydantic import ValidationError
 
-from engine.errors import InputError
+from engine.errors import InputError, parser
 from engine.pattern import geometry as geo
 from engine.pattern.spec import PatternSpec
 
 MAX_PATTERN_BYTES = 20_000_000
 
 
+@parser("a GarmentCode pattern", name_of=lambda data, source="pattern": source)
 def parse_pattern(data: dict | str | bytes, source: str = "pattern") -> PatternSpec:
     """A PatternSpec from JSON text or an already-parsed dict; InputError on anything wrong."""
     if isinstance(data, (str, bytes)):
@@ -37,6 +38,7 @@ def parse_pattern(data: dict | str | bytes, source: str = "pattern") -> PatternS
         raise InputError(f"{source}: invalid pattern: " + "; ".join(parts) + more) from None
 
 
+@parser("a GarmentCode pattern")
 def load_pattern(path: str | Path) -> PatternSpec:
     path = Path(path)
     if not path.is_file():

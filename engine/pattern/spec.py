@@ -116,6 +116,13 @@ class PanelHint(BaseModel):
     model_config = ConfigDict(extra="forbid")
     region: Literal["torso", "left_arm", "right_arm", "left_leg", "right_leg", "hips"] = "torso"
     side: Literal["front", "back", "left", "right", "around"] = "front"
+    # a panel inferred from a DXF pattern (engine.pattern.dxf_infer: its frame; placed by
+    # engine.garment.dxf_place): a front or back, a sleeve, a leg, or a band round the loop of
+    # edges it is sewn to (collar, cuff, waistband)
+    role: Literal["bodice", "sleeve", "leg", "band"] | None = None
+    # its key points (name -> [u, v] in pattern units, the panel's frame) that the placement uses:
+    # a bodice's shoulder and underarm points, a sleeve's cap ends, a leg's waist and crotch points
+    points: dict[str, tuple[float, float]] = Field(default_factory=dict)
 
 
 class TryonExtension(BaseModel):

@@ -11,11 +11,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine.errors import InputError
+from engine.errors import InputError, parser
 from engine.pattern import geometry as geo
 from engine.pattern.spec import PatternSpec
 
 SEAM_LENGTH_TOLERANCE = 0.10  # stitched edges may differ by this fraction (ease, gathering)
+MAX_EDGES = 20_000  # in a whole pattern: garments have hundreds; a large DXF a few thousand
 
 
 @dataclass(frozen=True)
@@ -36,7 +37,12 @@ def validate(spec: PatternSpec) -> list[Problem]:
     """All problems found, errors first."""
     out: list[Problem] = []
     scale, rel = spec.scale, spec.properties.curvature_coords == "relative"
+    if not (np.isfinite(scale) and scale > 0):
+        return [Problem("error", None, None, f"the pattern's units give a scale of {scale}: use cm, mm, m or inch")]
     panels = spec.pattern.panels
+    n_edges = sum(len(p.edges) for p in panels.values())
+    if n_edges > MAX_EDGES:
+        return [Problem("error", None, None, f"{n_edges:,} edges, more than {MAX_EDGES:,}: simplify the pattern")]
     for name, panel in panels.items():
         out += _check_panel(name, panel, scale, rel)
     used: dict[tuple[str, int], int] = {}
@@ -76,6 +82,8 @@ def validate(spec: PatternSpec) -> list[Problem]:
 def _check_panel(name: str, panel, scale: float, rel: bool) -> list[Problem]:
     out: list[Problem] = []
     edges = panel.edges
+    if not (np.all(np.isfinite(panel.translation)) and np.all(np.isfinite(panel.rotation))):
+        return [Problem("error", name, None, "placement (translation or rotation) is not a finite number")]
     if len(edges) < 2:
         return [Problem("error", name, None, f"a panel needs a closed outline of at least 2 edges, got {len(edges)}")]
     for i, e in enumerate(edges):
@@ -92,12 +100,15 @@ def _check_panel(name: str, panel, scale: float, rel: bool) -> list[Problem]:
             out.append(Problem("error", name, i, f"degenerate edge: length {length * 1000:.2f} mm"))
     if any(p.level == "error" for p in out):
         return out
-    poly = geo.outline(panel, scale, rel)
+    dense = [geo.edge_dense(panel, e, scale, rel, 64) for e in edges]  # once: outline and its edge numbers
+    poly = np.concatenate([d[:-1] for d in dense], axis=0)  # = geo.outline(panel, scale, rel)
     if not np.all(np.isfinite(poly)):
         return [Problem("error", name, None, "outline has non-finite coordinates")]
-    seg_edge = np.concatenate([np.full(len(geo.edge_dense(panel, e, scale, rel, 64)) - 1, i)
-                               for i, e in enumerate(edges)])
-    crossing = _self_intersection(poly, seg_edge)
+    seg_edge = np.concatenate([np.full(len(d) - 1, i) for i, d in enumerate(dense)])
+    try:
+        crossing = _self_intersection(poly, seg_edge)
+    except InputError as e:  # too intricate to check: said for this panel
+        return [Problem("error", name, None, str(e))]
     if crossing is not None:
         i, j = crossing
         out.append(Problem("error", name, i, f"outline crosses itself (edge {i} crosses edge {j})"))
@@ -108,14 +119,14 @@ def _check_panel(name: str, panel, scale: float, rel: bool) -> list[Problem]:
 
 
 def _self_intersection(poly: np.ndarray, seg_edge: np.ndarray) -> tuple[int, int] | None:
-    """First pair of non-adjacent outline segments that properly cross, as (edge, edge);
-    seg_edge: (M,) the edge each outline segment belongs to."""
+    """First pair (smallest first segment, then second) of non-adjacent outline segments that
+    properly cross, as (edge, edge); seg_edge: (M,) the edge each outline segment belongs to.
+    Only segments that share a cell of a uniform grid are tested: near-linear in M for outlines
+    (all pairs at once took minutes and gigabytes for a DXF of thousands of edges)."""
     m = len(poly)
     a, b = poly, np.roll(poly, -1, axis=0)
-    # proper intersection of segments i and j via orientation tests, all pairs at once
-    d1 = b - a
-    i, j = np.triu_indices(m, k=2)
-    keep = ~((i == 0) & (j == m - 1))  # first and last segments share a vertex
+    i, j = _grid_pairs(a, b)
+    keep = (j - i >= 2) & ~((i == 0) & (j == m - 1))  # neighbours share a vertex
     i, j = i[keep], j[keep]
 
     def orient(p, q, r):
@@ -125,14 +136,57 @@ def _self_intersection(poly: np.ndarray, seg_edge: np.ndarray) -> tuple[int, int
     o2 = orient(a[i], b[i], b[j])
     o3 = orient(a[j], b[j], a[i])
     o4 = orient(a[j], b[j], b[i])
-    eps = 1e-14 * (1 + np.abs(d1).max()) ** 2
+    eps = 1e-14 * (1 + np.abs(b - a).max()) ** 2
     hit = (o1 * o2 < -eps) & (o3 * o4 < -eps)
     if not hit.any():
         return None
-    k = int(np.argmax(hit))
-    return int(seg_edge[i[k]]), int(seg_edge[j[k]])
+    k = np.lexsort((j[hit], i[hit]))[0]
+    return int(seg_edge[i[hit][k]]), int(seg_edge[j[hit][k]])
 
 
+MAX_GRID_PAIRS = 20_000_000  # candidate segment pairs at most (~1 GB of scratch); more is refused
+
+
+def _grid_pairs(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(i, j), i < j: the segment pairs (a[k], b[k]) whose bounding boxes share a grid cell; the
+    cell is about twice the median segment length, so a segment covers a few cells."""
+    m = len(a)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    span = float(np.max(hi.max(axis=0) - lo.min(axis=0))) or 1.0
+    cell = max(2.0 * float(np.median(np.linalg.norm(b - a, axis=1))), span / 4096, 1e-12)
+    c0 = np.floor((lo - lo.min(axis=0)) / cell).astype(np.int64)
+    c1 = np.floor((hi - lo.min(axis=0)) / cell).astype(np.int64)
+    nx, ny = c1[:, 0] - c0[:, 0] + 1, c1[:, 1] - c0[:, 1] + 1
+    per = nx * ny
+    if per.sum() > 64 * m + 1_000_000:
+        raise InputError(f"an outline of {m:,} segments is too intricate to check (long segments across "
+                         "a dense outline): simplify the pattern")
+    seg = np.repeat(np.arange(m), per)
+    k = np.arange(len(seg)) - np.repeat(np.cumsum(per) - per, per)  # index of the cell within its box
+    cx = np.repeat(c0[:, 0], per) + k % np.repeat(nx, per)
+    cy = np.repeat(c0[:, 1], per) + k // np.repeat(nx, per)
+    key = cx * (int(c1[:, 1].max()) + 1) + cy
+    order = np.lexsort((seg, key))
+    key, seg = key[order], seg[order]
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])  # runs of one cell
+    lens = np.diff(np.r_[starts, len(key)])
+    if int((lens * (lens - 1) // 2).sum()) > MAX_GRID_PAIRS:
+        raise InputError(f"an outline of {m:,} segments has too many overlapping segments to check: "
+                         "simplify the pattern")
+    after = np.repeat(lens, lens) - (np.arange(len(key)) - np.repeat(starts, lens)) - 1  # partners behind
+    p, d, pi, pj = np.flatnonzero(after > 0), 1, [], []
+    while len(p):  # each member with the one d places behind it in its run: work ~ the pairs
+        pi.append(seg[p])
+        pj.append(seg[p + d])
+        d += 1
+        p = p[after[p] >= d]
+    if not pi:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    i, j = np.concatenate(pi), np.concatenate(pj)
+    return np.minimum(i, j), np.maximum(i, j)
+
+
+@parser("a pattern", name_of=lambda spec, source="pattern": source)
 def check(spec: PatternSpec, source: str = "pattern") -> list[Problem]:
     """Raise InputError (one line, all errors) if the pattern has errors; return the warnings."""
     problems = validate(spec)

@@ -11,20 +11,65 @@ from engine.pattern.io import load_pattern
 PATTERN_SIZE_ADVICE = "a pattern has one size: grade it larger for this body"
 
 
+def _roles_placement(spec, body: Body):
+    """The placement of a pattern whose panels carry a DXF inference's roles (engine.garment.
+    dxf_place), else None (the pattern's own, engine.garment.place.pattern_placement)."""
+    from engine.garment.dxf_place import dxf_placement, has_roles
+
+    return dxf_placement(spec, body)[0] if body is not None and has_roles(spec) else None
+
+
+def is_dxf(arg: str) -> bool:
+    return Path(arg).suffix.lower() == ".dxf"
+
+
+def dxf_garment(path: Path, body: Body, size: str | None):
+    """(spec, placement, display name) of a DXF cutting pattern in one of its sizes: its sample size
+    (else its middle one) by default; `auto`: the smallest whose girth covers the body's with
+    ease (engine.pattern.dxf_size). Its seams and placement are inferred."""
+    from engine.pattern.dxf import import_pattern
+    from engine.pattern.dxf_read import read_pattern
+
+    path = Path(path)
+    pattern = read_pattern(path)
+    how = ""
+    if size == "auto":
+        from engine.body.measure import measure
+        from engine.pattern.dxf_size import recommend_size
+
+        m = measure(body)
+        size, why = recommend_size(pattern, {"chest": 100 * m.bust, "hips": 100 * m.hips})
+        how = f", {why}"
+    imp = import_pattern(path, size, pattern=pattern)
+    if imp.kind == "pieces":
+        raise InputError(f"{path.name}: {'; '.join(imp.unsure)}")
+    return imp.spec, _roles_placement(imp.spec, body), f"{path.name} (size {imp.size}{how})"
+
+
+def dxf_sizes(path: Path, body: Body) -> tuple[list[str], int]:
+    """--size auto on a DXF: (its sizes, the index of the one its girths recommend)."""
+    from engine.body.measure import measure
+    from engine.pattern.dxf_read import read_pattern
+    from engine.pattern.dxf_size import recommend_size
+
+    pattern = read_pattern(path)
+    m = measure(body)
+    first, _ = recommend_size(pattern, {"chest": 100 * m.bust, "hips": 100 * m.hips})
+    return list(pattern.sizes), pattern.sizes.index(first)
+
+
 def resolve_garment(arg: str, body: Body, size: str | None = "M"):
     """Returns (PatternSpec, placement function or None for the spec's own, display name).
     size: catalogue size; None means the default (M) for catalogue garments."""
     path = Path(arg)
-    if path.suffix.lower() == ".dxf":
-        raise InputError(f"{path.name}: a DXF holds the pieces but no seams or placement; import it with its assembly "
-                         f"file first (tryon pattern import {path.name} --assembly ASSEMBLY.json --out DIR) and "
-                         "give DIR/pattern.json")
+    if is_dxf(arg):  # a cutting pattern: its seams inferred, in one of its sizes
+        return dxf_garment(path, body, size)
     if path.suffix.lower() == ".json" or path.exists():
         if size is not None:
             raise InputError(f"--size {size} applies to catalogue garments; a pattern file ({path.name}) "
                              "has its own size: leave --size out")
         spec = load_pattern(path)
-        return spec, None, path.name
+        return spec, _roles_placement(spec, body), path.name
     size = size or "M"
     from engine.garment.catalogue import make_garment
     from engine.pattern.catalogue import CATALOGUE
@@ -43,6 +88,8 @@ def add_size_hint(err: Exception, arg: str, body: Body, size: str | None) -> Non
     from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES, recommend_size
 
     if not getattr(err, "too_small", False):
+        return
+    if is_dxf(arg):  # a DXF has its graded sizes
         return
     if arg not in CATALOGUE:  # a pattern file has one size: "try a larger size" means grading it
         msg = str(err).replace("(try a larger size)", "(a pattern has one size: grade it larger)")
@@ -119,8 +166,7 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
     and so are the larger sizes --size auto goes on to; if the arms cannot be raised, the
     try-on ends with that reason, in any size."""
     from engine.errors import SimulationError
-    from engine.garment.catalogue import make_garment
-    from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES, recommend_size
+    from engine.pattern.catalogue import AUTO, CATALOGUE
 
     lifted = []  # the ArmLift, once the arms were found in the way
 
@@ -167,7 +213,7 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
             return loaded
         return res
 
-    if arg not in CATALOGUE or size != AUTO:
+    if (arg not in CATALOGUE and not is_dxf(arg)) or size != AUTO:
         try:
             return attempt(lambda b: resolve_garment(arg, b, size))
         except SimulationError as e:
@@ -185,6 +231,18 @@ def _verdict(report: dict) -> str:
     return "fits"
 
 
+def _auto_sizes(arg: str, body: Body):
+    """(the garment's sizes, smallest first; the index of the one the body's girths choose;
+    make(arg, body, size) -> (spec, placement, name)): a DXF's own sizes, else the catalogue's."""
+    from engine.garment.catalogue import make_garment
+    from engine.pattern.catalogue import SIZES, recommend_size
+
+    if is_dxf(arg):
+        sizes, first = dxf_sizes(Path(arg), body)
+        return sizes, first, dxf_garment
+    return list(SIZES), SIZES.index(recommend_size(arg, body)), make_garment
+
+
 def _dress_auto(arg: str, body: Body, attempt, note=None):
     """--size auto (dress_in_size): from the size the body's girths choose, one size larger while
     it comes out too small (refused, or tight) -- up to AUTO_TRIES larger --, one smaller while it
@@ -192,19 +250,18 @@ def _dress_auto(arg: str, body: Body, attempt, note=None):
     fits is returned; when none does, the drape that came closest (a tight one before one that
     slid) with a warning naming every size tried and why, or the last refusal raised."""
     from engine.errors import SimulationError
-    from engine.garment.catalogue import make_garment
-    from engine.pattern.catalogue import SIZES, recommend_size
 
-    first = i = SIZES.index(recommend_size(arg, body))
+    sizes, first, make = _auto_sizes(arg, body)
+    i = first
     tried: list[dict] = []
     ended: dict[str, tuple] = {}  # size -> (result, report, verdict, size) of drapes that ended
     error = None
     while True:
-        s = SIZES[i]
+        s = sizes[i]
         how = "chosen from the body's girths" if not tried else \
             f"chosen by draping: {', '.join(t['size'] + ' too ' + t['verdict'] for t in tried)}"
         try:
-            res, report = attempt(lambda b: make_garment(arg, b, s), lambda name: name[:-1] + f", {how})")
+            res, report = attempt(lambda b: make(arg, b, s), lambda name: name[:-1] + f", {how})")
         except SimulationError as e:
             verdict = {(True, False): "small", (False, True): "large"}.get(
                 (getattr(e, "too_small", False), getattr(e, "too_large", False)))
@@ -221,10 +278,10 @@ def _dress_auto(arg: str, body: Body, attempt, note=None):
                    next(w for w in report["warnings"] if w.startswith("the garment slid")))
         tried.append({"size": s, "verdict": verdict, "error": why})
         nxt = i + 1 if verdict == "small" else i - 1
-        if not 0 <= nxt < len(SIZES) or SIZES[nxt] in {t["size"] for t in tried} or nxt > first + AUTO_TRIES:
+        if not 0 <= nxt < len(sizes) or sizes[nxt] in {t["size"] for t in tried} or nxt > first + AUTO_TRIES:
             break
         if note is not None:
-            note(s, why, SIZES[nxt])
+            note(s, why, sizes[nxt])
         i = nxt
     summary = "; ".join(f"{t['size']} too {t['verdict']} ({t['error']})" for t in tried)
     if not ended:

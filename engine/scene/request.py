@@ -106,10 +106,12 @@ class TryOnRequest(TryOnOptions):
     """A try-on: the garment (a catalogue name, or a pattern) and its size, and how to simulate."""
 
     garment: str = Field(..., description="a catalogue garment (see `tryon garments`) or a pattern: a "
-                         "GarmentCode JSON file (the service: the id of an uploaded pattern)")
+                         "GarmentCode JSON file, or a DXF cutting pattern (.dxf: its seams and placement "
+                         "inferred, see `tryon pattern import`) (the service: the id of an uploaded pattern)")
     size: str | None = Field(None, description="catalogue size XS, S, M, L, XL, XXL (default M), on the women's or "
-                             "men's chart (a default body's own, any other body's by the sex its shape reads); or "
-                             "auto: the smallest size whose chart girths cover the body's, then by draping: the "
-                             "next larger while it comes out too small (refused, or tight), up to two more, the "
-                             "next smaller while it slides down the body; when none fits, the report says so. "
-                             "Not for patterns")
+                             "men's chart (a default body's own, any other body's by the sex its shape reads); a "
+                             "DXF pattern's own size names (default: its sample size); or auto: the smallest size "
+                             "whose girths cover the body's (catalogue: the chart's; DXF: the pieces' chest or hip "
+                             "width, with ease), then by draping: the next larger while it comes out too small "
+                             "(refused, or tight), up to two more, the next smaller while it slides down the body; "
+                             "when none fits, the report says so. Not for GarmentCode patterns")

@@ -1,7 +1,7 @@
 """The live 3D view of a running try-on: a viser server (loopback, a free port) in the worker
 process, fed by the engine's observer with the body and the cloth as they are simulated, and
 recorded into a .viser file that the page plays back once the try-on is done. FastAPI relays the
-viewer at /viewer/{job} (app/main.py)."""
+viewer at /viewer/{job} (app/api/routes/viewer.py)."""
 
 from __future__ import annotations
 

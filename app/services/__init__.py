@@ -1,0 +1,1 @@
+"""What the routes call: uploads parsed by the engine, try-on requests checked and resolved."""
