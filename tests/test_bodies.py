@@ -93,7 +93,8 @@ def test_measurements_with_the_arms_down_or_held_out(tmp_path, variant):
     """The arms lowered to 20 degrees, down to the thighs, or held out (T-pose): every landmark is
     found, in order; waist and hips as in the A-pose; the chest within 3-4 cm (T-pose: larger --
     the raised arms lift and widen it; the cut under the armpit's fold reached 30 cm along the
-    arms and read 174 cm before)."""
+    arms and read 174 cm before). Arms down to the thighs hang ~0 from the torso (arm_gap: their
+    cuts overlap the torso's in x), not absent as in a T-pose (NaN)."""
     for spec in ("default:male", "default:female"):
         ref, m = measure(resolve_body(spec)), measure(as_scan(tmp_path, spec, variant))
         assert ordered(m), (spec, variant, m.notes)
@@ -103,6 +104,10 @@ def test_measurements_with_the_arms_down_or_held_out(tmp_path, variant):
         limit = (-0.01, 0.08) if variant == "t-pose" else (-0.04, 0.03)
         assert limit[0] < m.bust - ref.bust < limit[1], (spec, m.bust, ref.bust)
         assert np.isfinite([m.shoulder_width, m.arm_length]).all(), (spec, m.notes)
+        if variant == "arms-thighs":  # arms pressed to the chest's sides, their cuts overlapping it in x
+            assert m.arm_gap < 0.01, (spec, m.arm_gap)
+        elif variant == "t-pose":
+            assert np.isnan(m.arm_gap), (spec, m.arm_gap)
 
 
 def test_a_body_with_no_crotch_nor_armpits_is_measured_with_notes():

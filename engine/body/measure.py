@@ -438,9 +438,12 @@ def _find_armpit(prof: _Profile, h: float, crotch: float, m: Measurements) -> fl
 
 def _arm_gap(prof: _Profile, y: float) -> float:
     """The narrower horizontal gap between the torso's cut at height y and the arm beside it on
-    either side; 0 where no separate arm is cut beside the torso but the torso cut is much wider
-    than in the cut 2 cm below (the arm touches it); NaN where no arm hangs at that height (a
-    T-pose)."""
+    either side; for an arm's cut that overlaps the torso's in x (pressed against it, or into
+    it), the smallest distance between their points (~0); 0 where no separate arm is cut beside
+    the torso but the torso cut is much wider than in the cut 2 cm below (the arm touches it);
+    NaN where no arm hangs at that height (a T-pose)."""
+    from scipy.spatial import cKDTree
+
     pieces = prof.cut(y)
     core = prof.central_piece(pieces)
     if core is None:
@@ -449,8 +452,11 @@ def _arm_gap(prof: _Profile, y: float) -> float:
     merged = below is not None and (core.xmax - core.xmin) > 1.25 * (below.xmax - below.xmin)
     gaps = []
     for side, arms in zip((-1.0, 1.0), _beside(pieces, core)):
+        pressed = [p for p in _arm_pieces(prof, pieces, core, side) if all(p is not q for q in arms)]
         if arms:
             gaps.append(min((p.xmin - core.xmax) if side > 0 else (core.xmin - p.xmax) for p in arms))
+        elif pressed:
+            gaps.append(float(cKDTree(core.points).query(np.vstack([p.points for p in pressed]))[0].min()))
         elif merged:
             gaps.append(0.0)
     return float(min(gaps)) if gaps else float("nan")
