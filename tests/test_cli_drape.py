@@ -54,8 +54,8 @@ def test_missing_pattern_file(tmp_path):
     ("{this is not json", "not valid JSON"),
     ('{"panels": {}}', "no 'pattern'"),
     ('{"pattern": {"panels": {"a": {"vertices": [[0, 0], [10, 0], [0, 10], [10, 10]], '
-     '"edges": [{"endpoints": [0, 1]}, {"endpoints": [1, 2]}, {"endpoints": [2, 3]}, {"endpoints": [3, 0]}]}}}}',
-     "crosses itself"),
+     '"edges": [{"endpoints": [0, 1]}, {"endpoints": [1, 2]}, {"endpoints": [2, 7]}, {"endpoints": [7, 0]}]}}}}',
+     "names vertex 7"),
 ])
 def test_malformed_pattern_file(tmp_path, content, words):
     p = tmp_path / "bad.json"

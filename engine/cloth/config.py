@@ -64,6 +64,23 @@ class Sewing:
     welded: np.ndarray  # (P,) bool: pairs already welded (the scene updates it in place)
     tau: float  # s: an open pair is pulled to close its gap in this time ...
     vmax: float  # m/s: ... at most this fast
+    # a flat layout: each panel's velocities are damped toward the panel's mean velocity at this
+    # rate (1/s), so a panel pulled at its seams moves as a whole instead of folding about its
+    # middle (None: not); panel (N,) int64 the panel of each vertex
+    panel: np.ndarray | None = None
+    panel_damping: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class Attachment:
+    """Vertices kept in front of planes (GarmentCode's attachment: a waistband kept from sliding
+    down while it is sewn; engine.cloth.welds.hold_on_planes)."""
+
+    vertices: np.ndarray  # (K,) int64
+    points: np.ndarray  # (K, 3) a point of each vertex's plane
+    normals: np.ndarray  # (K, 3) unit: the side of the plane the vertex is kept on
+    tau: np.ndarray  # (K,) s: a vertex behind its plane is brought back in this time ...
+    vmax: np.ndarray  # (K,) m/s: ... at most this fast
 
 
 @dataclass
@@ -75,3 +92,4 @@ class Control:
     friction_scale: float = 1.0  # x the fabric's cloth-body friction
     collide_every: float = 1  # steps between collision checks (a fraction: that many on average)
     sewing: Sewing | None = None  # seams pulled shut (strain recovery and the strain guard wait meanwhile)
+    attachment: Attachment | None = None  # vertices held on planes

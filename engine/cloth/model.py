@@ -34,6 +34,7 @@ EQ4_FACTOR = 0.4 * np.pi
 MASS_FLOOR = 0.5
 MASS_SCALE_PERCENTILE = 5.0
 DAMPING_CAP = 0.25  # a spring's damping is at most this x m / (dt degree): see _assemble
+EASE = 0.10  # stitched edges differing by at most this fraction are eased together, more are gathered
 
 
 @dataclass(frozen=True)
@@ -415,7 +416,8 @@ def seam_flexion(uv: np.ndarray, springs: np.ndarray, kind: np.ndarray, rest: np
 def weld_model(model: ClothModel, vertex_map: np.ndarray, uv: np.ndarray | None = None) -> ClothModel:
     """Merge vertices (sewn seam pairs): vertex_map (N,) -> new index. Springs keep their rest
     lengths from the flat pattern; duplicates (a spring present on both panels) are merged into
-    one with the longer rest length;
+    one with the longer rest length (eased), or the shorter where they differ by more than EASE
+    (gathered);
     masses add up; seams are gone (they are now shared vertices). With the flat pattern's uv
     (N, 2), flexion springs across the seams are added (seam_flexion)."""
     n_new = int(vertex_map.max()) + 1
@@ -426,12 +428,15 @@ def weld_model(model: ClothModel, vertex_map: np.ndarray, uv: np.ndarray | None 
     s, rest, k, kind = s[keep], model.rest[keep], model.stiffness[keep], model.kind[keep]
     key = np.sort(s, axis=1)
     _, first, group = np.unique(_pair_keys(key), return_index=True, return_inverse=True)
-    # a spring on both sides of a seam keeps the longer rest length: where the two stitched edges
-    # differ in length (eased in, up to the 10 % the validation allows), the shorter rest would
-    # hold the seam at the short edge's length and leave the long side's springs along the seam
-    # stretched past the strain limit for good
+    # a spring on both sides of a seam: where the stitched edges differ a little (eased in), the
+    # longer rest (the shorter would leave the long side stretched past the strain limit); where
+    # they differ more (a gather: the longer edge sewn evenly into the shorter), the shorter, so the
+    # seam takes the short edge's length and the long side gathers
     longest = np.full(len(first), -np.inf)
     np.maximum.at(longest, group.ravel(), rest)
+    shortest = np.full(len(first), np.inf)
+    np.minimum.at(shortest, group.ravel(), rest)
+    longest = np.where(longest > (1.0 + EASE) * shortest, shortest, longest)
     order = np.argsort(first)
     first, longest = first[order], longest[order]
     s, rest, k, kind = s[first], longest, k[first], kind[first]

@@ -13,9 +13,9 @@ from engine.cloth import kernels_forces as KF
 from engine.cloth import kernels_integrate as KI
 from engine.cloth import kernels_strain as KS
 from engine.cloth.buffers import StepBuffers
-from engine.cloth.config import Sewing, StepConfig
+from engine.cloth.config import Attachment, Sewing, StepConfig
 from engine.cloth.model import ClothModel, ClothState
-from engine.cloth.welds import pull_seams
+from engine.cloth.welds import damp_about_panels, hold_on_planes, pull_seams
 from engine.collide.base import Answer
 
 
@@ -52,10 +52,20 @@ def modify_velocities(model: ClothModel, state: ClothState, buf: StepBuffers, co
                                 config.vm_passes, buf.work, buf.geo, buf.ends, recover, n_listed)
 
 
-def sew(model: ClothModel, state: ClothState, buf: StepBuffers, sewing: Sewing) -> None:
-    """The open seam pairs pulled shut (never into the body)."""
+def sew(model: ClothModel, state: ClothState, buf: StepBuffers, sewing: Sewing, dt: float) -> None:
+    """The open seam pairs pulled shut (never into the body); a flat layout's panels then damped
+    toward their own mean motion (Sewing.panel_damping)."""
     pull_seams(state.x, state.v, model.mass, sewing.pairs, sewing.welded, sewing.tau, sewing.vmax, buf.contact,
                buf.contact_n)
+    if sewing.panel is not None and sewing.panel_damping > 0.0:
+        damp_about_panels(state.v, model.mass, sewing.panel, int(sewing.panel.max()) + 1,
+                          float(np.exp(-sewing.panel_damping * dt)))
+
+
+def attach(state: ClothState, attachment: Attachment) -> None:
+    """The attached vertices brought to their planes (the velocity along each plane kept)."""
+    a = attachment
+    hold_on_planes(state.x, state.v, a.vertices, a.points, a.normals, a.tau, a.vmax)
 
 
 def collision_points(state: ClothState, buf: StepBuffers, ahead: float, out: np.ndarray) -> None:

@@ -114,7 +114,9 @@ class ClothSolver:
         # velocity modification against super-elasticity (seed 003 §4.3, seed 000 eq. 5/6)
         n_act = passes.modify_velocities(m, state, buf, cfg, forcing.gravity, dt, recover, n_over)
         if sewing is not None:  # (before the collision response: nothing is sewn into the body)
-            passes.sew(m, state, buf, sewing)
+            passes.sew(m, state, buf, sewing, dt)
+        if c.attachment is not None:
+            passes.attach(state, c.attachment)
         t1 = time.perf_counter()
         # collision detection and response (vertices and face points, eq. 12/15) every
         # collide_every steps, the points predicted that far ahead, alternated with the strain

@@ -85,3 +85,43 @@ def pull_seams(x, v, mass, pairs, welded, tau, vmax, contact, contact_n):
             v[end, 0] += px
             v[end, 1] += py
             v[end, 2] += pz
+
+
+@serial_kernel(fastmath=False)
+def damp_about_panels(v, mass, panel, n_panels, keep):
+    """Each vertex's velocity relative to its panel's mass-weighted mean velocity scaled by keep
+    (0..1): the panel's own motion is not damped, its flapping is."""
+    mv = np.zeros((n_panels, 3))
+    m = np.zeros(n_panels)
+    for i in range(v.shape[0]):
+        p = panel[i]
+        m[p] += mass[i]
+        for c in range(3):
+            mv[p, c] += mass[i] * v[i, c]
+    for p in range(n_panels):
+        if m[p] > 0.0:
+            for c in range(3):
+                mv[p, c] /= m[p]
+    for i in range(v.shape[0]):
+        p = panel[i]
+        for c in range(3):
+            v[i, c] = mv[p, c] + keep * (v[i, c] - mv[p, c])
+
+
+@serial_kernel(fastmath=False)
+def hold_on_planes(x, v, idx, points, normals, tau, vmax):
+    """Attachment (GarmentCode's simulator keeps some edges from sliding while sewing): each
+    vertex idx[k] is kept on the side of the plane through points[k] that normals[k] points to.
+    Its velocity along the normal is at least -d / tau[k] (d: its distance in front of the
+    plane; behind it, d < 0, that brings it back, at most vmax[k] fast), so it eases onto the
+    plane instead of crossing it; any velocity away from the plane, and along it, is kept."""
+    for k in range(idx.shape[0]):
+        i = idx[k]
+        nx, ny, nz = normals[k, 0], normals[k, 1], normals[k, 2]
+        d = (x[i, 0] - points[k, 0]) * nx + (x[i, 1] - points[k, 1]) * ny + (x[i, 2] - points[k, 2]) * nz
+        want = min(-d / tau[k], vmax[k])
+        vn = v[i, 0] * nx + v[i, 1] * ny + v[i, 2] * nz
+        if vn < want:
+            v[i, 0] += (want - vn) * nx
+            v[i, 1] += (want - vn) * ny
+            v[i, 2] += (want - vn) * nz

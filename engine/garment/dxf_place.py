@@ -47,7 +47,7 @@ class _Body:
 
     def __init__(self, body: Body):
         from engine.body.measure import measure
-        from engine.pattern.catalogue import _neck_half_width, _side_neck_height
+        from engine.pattern.catalogue import neck_half_width, _side_neck_height
 
         self.body = body
         m = measure(body)
@@ -63,8 +63,8 @@ class _Body:
         self.crotch, self.knee = floor + m.crotch_height, floor + m.knee_height
         nw = 0.045 * m.height  # the catalogue's neckline side point (engine.pattern.catalogue._fit)
         nh = _side_neck_height(body, nw, self.shoulder)
-        if _neck_half_width(body, nh + 0.01) + 0.01 > nw:
-            nh = _side_neck_height(body, _neck_half_width(body, nh + 0.01) + 0.01, self.shoulder)
+        if neck_half_width(body, nh + 0.01) + 0.01 > nw:
+            nh = _side_neck_height(body, neck_half_width(body, nh + 0.01) + 0.01, self.shoulder)
         self.neck = max(self.shoulder + 0.04, nh + 0.01)
         self.sections = BodySections(body, cover=True)
         self._arms = None

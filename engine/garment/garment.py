@@ -30,7 +30,9 @@ class Garment:
     each vertex's own panel frame (metres; rest lengths come from these); panel: (N,) int16
     panel index; lattice: (N, 2) int32 grid indices (-1 off the grid) for flexion springs;
     quads: (Q, 4) int32; tris: (T, 3) int32; seams: (P, 2) int32 vertex pairs to sew together;
-    seam_id: (P,) int32 which stitch of the spec each pair belongs to.
+    seam_id: (P,) int32 which stitch of the spec each pair belongs to; labelled: the vertices of
+    the edges the pattern labels (GarmentCode's edge labels: "lower_interface", "strapless_top",
+    "right_collar", ...), by label.
     """
 
     positions: np.ndarray
@@ -44,6 +46,7 @@ class Garment:
     panel_names: list[str]
     stitch_names: list[str]
     warnings: list[str] = field(default_factory=list)
+    labelled: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def n_vertices(self) -> int:
@@ -133,10 +136,16 @@ def build_garment(spec: PatternSpec, h: float = 0.015, place: Placement | None =
         seams.append(np.stack([va, vb], axis=1))
         seam_id.append(np.full(len(va), s, dtype=np.int32))
         stitch_names.append(f"{a.panel}[{a.edge}]-{b.panel}[{b.edge}]")
+    labelled: dict[str, list] = {}
+    for n in names:
+        for i, e in enumerate(panels[n].edges):
+            if e.label:
+                labelled.setdefault(e.label, []).append(meshes[n].edge_vertices[i] + offset[n])
     seams_arr = np.concatenate(seams).astype(np.int32) if seams else np.zeros((0, 2), np.int32)
     seam_id_arr = np.concatenate(seam_id) if seam_id else np.zeros(0, np.int32)
     return Garment(positions=positions, uv=np.concatenate(uv), panel=np.concatenate(pid),
                    lattice=np.concatenate(lat), quads=np.concatenate(quads).astype(np.int32),
                    tris=np.concatenate(tris).astype(np.int32), seams=seams_arr, seam_id=seam_id_arr,
                    panel_names=names, stitch_names=stitch_names,
-                   warnings=[str(p) for p in problems])
+                   warnings=[str(p) for p in problems],
+                   labelled={k: np.unique(np.concatenate(v)) for k, v in labelled.items()})

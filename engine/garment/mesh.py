@@ -19,6 +19,7 @@ import triangle as tr
 from matplotlib.path import Path as MplPath
 
 from engine.errors import InputError
+from engine.pattern import geometry as geo
 from engine.jit import serial_kernel
 
 
@@ -65,6 +66,64 @@ def farther_than(p, poly, r, out):
     return out
 
 
+def _pinch_crossings(ring: np.ndarray, edge_vertices: list[np.ndarray], name: str):
+    """An outline that crosses itself, joined where it crosses (GarmentCode draws such panels:
+    a neckline wider than its strap crosses the armhole; GarmentCode fills every part the
+    outline encloses, and so do we). At each crossing the outline's sample nearest the crossing
+    on either segment become one vertex at the crossing point: the outline then touches itself
+    there instead of crossing, and its parts are meshed joined at that vertex.
+    Returns (outline vertices without the merged ones, the outline as indices into them -- a
+    vertex may come twice --, edge_vertices into them)."""
+    n = len(ring)
+    loop = np.arange(n)
+    i, j, t = geo.segment_crossings(ring)
+    if not len(i):
+        return ring, loop, edge_vertices
+    parent = np.arange(n)
+
+    def root(v):
+        while parent[v] != v:
+            v = parent[v]
+        return v
+
+    pos = ring.copy()
+    for si, sj, tt in zip(i.tolist(), j.tolist(), t.tolist()):
+        x = ring[si] + tt * (ring[(si + 1) % n] - ring[si])
+        va = si if tt < 0.5 else (si + 1) % n
+        vb = min((sj, (sj + 1) % n), key=lambda v: float(np.linalg.norm(ring[v] - x)))
+        ra, rb = root(va), root(vb)
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+            pos[min(ra, rb)] = x
+    roots = np.array([root(v) for v in range(n)])
+    kept = np.unique(roots)
+    new = np.searchsorted(kept, roots)
+    pinched = pos[kept]
+    if len(geo.segment_crossings(pinched[new])[0]):
+        raise InputError(f"panel '{name}': its outline crosses itself in a way that cannot be joined at the "
+                         "crossings; check the panel's edges")
+    return pinched, new, [new[ev] for ev in edge_vertices]
+
+
+def _drop_unused(uv, quads, tris, edge_vertices, lattice):
+    """Outline vertices that no face uses -- the tip of a crossing outline's part that encloses
+    nothing (a dart's point past a neckline that crosses it) -- merged into the nearest vertex a
+    face uses, so every vertex has a mass and the edges keep their vertex lists."""
+    used = np.zeros(len(uv), dtype=bool)
+    used[quads.ravel()] = True
+    used[tris.ravel()] = True
+    if used.all():
+        return uv, quads, tris, edge_vertices, lattice
+    keep = np.flatnonzero(used)
+    target = np.arange(len(uv))
+    for v in np.flatnonzero(~used):
+        target[v] = keep[np.argmin(np.linalg.norm(uv[keep] - uv[v], axis=1))]
+    new = np.cumsum(used) - 1
+    remap = new[target]
+    return (uv[keep], remap[quads].astype(np.int32), remap[tris].astype(np.int32),
+            [remap[ev].astype(np.int32) for ev in edge_vertices], lattice[keep])
+
+
 def mesh_panel(edge_points: list[np.ndarray], h: float, name: str = "panel") -> PanelMesh:
     """Mesh a panel whose outline is given as per-edge samples.
 
@@ -81,13 +140,15 @@ def mesh_panel(edge_points: list[np.ndarray], h: float, name: str = "panel") -> 
         edge_vertices.append(np.arange(k, k + n + 1, dtype=np.int32))
         k += n
     ring = np.concatenate(ring, axis=0)
-    nb = len(ring)
     edge_vertices[-1][-1] = 0  # closes the loop
-    edge_vertices = [ev % nb for ev in edge_vertices]
-    area = 0.5 * float(np.dot(ring[:, 0], np.roll(ring[:, 1], -1)) - np.dot(np.roll(ring[:, 0], -1), ring[:, 1]))
-    if abs(area) < (h * h):
+    edge_vertices = [ev % len(ring) for ev in edge_vertices]
+    ring, loop, edge_vertices = _pinch_crossings(ring, edge_vertices, name)
+    nb = len(ring)
+    r = ring[loop]
+    area = 0.5 * float(np.dot(r[:, 0], np.roll(r[:, 1], -1)) - np.dot(np.roll(r[:, 0], -1), r[:, 1]))
+    if abs(area) < (h * h) and len(loop) == len(ring):  # (a pinched outline's parts may cancel in the sum)
         raise InputError(f"panel '{name}' is too small to mesh at {h * 100:.1f} cm ({abs(area) * 1e4:.2f} cm^2)")
-    ccw = area > 0
+    ccw = area >= 0
 
     # interior lattice, aligned with the panel axes, away from the outline
     lo, hi = ring.min(axis=0), ring.max(axis=0)
@@ -100,10 +161,11 @@ def mesh_panel(edge_points: list[np.ndarray], h: float, name: str = "panel") -> 
     y0 = lo[1] + 0.5 * ((hi[1] - lo[1]) - (ny - 1) * h)
     ii, jj = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
     grid = np.stack([x0 + ii.ravel() * h, y0 + jj.ravel() * h], axis=1)
-    inside = MplPath(ring).contains_points(grid)
+    outline = MplPath(ring[loop])  # (non-zero winding: the parts of a pinched outline are all inside)
+    inside = outline.contains_points(grid)
     cand = np.flatnonzero(inside)
     if len(cand):
-        far = farther_than(grid[cand], ring, 0.5 * h, np.empty(len(cand), dtype=np.bool_))
+        far = farther_than(grid[cand], ring[loop], 0.5 * h, np.empty(len(cand), dtype=np.bool_))
         cand = cand[far]
     keep = np.zeros(nx * ny, dtype=bool)
     keep[cand] = True
@@ -122,8 +184,8 @@ def mesh_panel(edge_points: list[np.ndarray], h: float, name: str = "panel") -> 
     quads = np.stack([g[ci, cj], g[ci + 1, cj], g[ci + 1, cj + 1], g[ci, cj + 1]], axis=1)
 
     # band: constrained triangulation between the outline and the quad region's border
-    seg_outline = np.stack([np.arange(nb), (np.arange(nb) + 1) % nb], axis=1)
-    segments = [seg_outline]
+    seg_outline = np.stack([loop, np.roll(loop, -1)], axis=1)
+    segments = [seg_outline[seg_outline[:, 0] != seg_outline[:, 1]]]
     holes = np.zeros((0, 2))
     if len(quads):
         qe = np.concatenate([quads[:, [0, 1]], quads[:, [1, 2]], quads[:, [2, 3]], quads[:, [3, 0]]])
@@ -143,8 +205,9 @@ def mesh_panel(edge_points: list[np.ndarray], h: float, name: str = "panel") -> 
     # only inside segments when holes/concavities are enclosed; be explicit)
     if len(tris):
         cen = uv[tris].mean(axis=1)
-        tris = tris[MplPath(ring).contains_points(cen)]
+        tris = tris[outline.contains_points(cen)]
     quads = quads.astype(np.int32)
+    uv, quads, tris, edge_vertices, lattice = _drop_unused(uv, quads, tris, edge_vertices, lattice)
     if not ccw:  # a clockwise outline faces -z: wind faces the same way
         quads = quads[:, ::-1].copy()
         tris = tris[:, ::-1].copy()

@@ -253,7 +253,7 @@ def _fit(body: Body, size: str) -> Fit:
     # base is (a muscular neck and trapezius), with 1 cm to spare
     nw = 0.045 * m.height
     nh = _side_neck_height(body, nw, m.shoulder_height)
-    base = _neck_half_width(body, nh + 0.01)
+    base = neck_half_width(body, nh + 0.01)
     if base + 0.01 > nw:
         nw = base + 0.01
         nh = _side_neck_height(body, nw, m.shoulder_height)
@@ -276,7 +276,7 @@ def _ankle_girths(body: Body) -> tuple[np.ndarray, np.ndarray]:
     return 100 * ys, 100 * per
 
 
-def _neck_half_width(body: Body, y: float) -> float:
+def neck_half_width(body: Body, y: float) -> float:
     """Half the x-extent (m) of the neck at height y (vertices within 12 cm of the centre line)."""
     v = body.vertices
     s = v[(np.abs(v[:, 1] - y) < 0.005) & (np.abs(v[:, 0]) < 0.12), 0]

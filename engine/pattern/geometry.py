@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from engine.errors import InputError
 from engine.pattern.spec import Edge, Panel
 
 _DENSE = 256  # evaluation points per curved edge before arc-length resampling
@@ -141,3 +142,72 @@ def row_extent(outline: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarr
     lo = np.where(cross, xs, np.inf).min(axis=1)
     hi = np.where(cross, xs, -np.inf).max(axis=1)
     return np.where(np.isfinite(lo), lo, 0.0), np.where(np.isfinite(hi), hi, 0.0)
+
+
+def segment_crossings(poly: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The non-adjacent segments of the closed polyline poly (M, 2) (segment k: poly[k] to
+    poly[k + 1]) that properly cross: (i, j, t) with i < j, and t the crossing's fraction along
+    segment i. Only segments whose boxes share a cell of a uniform grid are tested: near-linear
+    in M for outlines."""
+    m = len(poly)
+    a, b = poly, np.roll(poly, -1, axis=0)
+    i, j = _grid_pairs(a, b)
+    keep = (j - i >= 2) & ~((i == 0) & (j == m - 1))  # neighbours share a vertex
+    i, j = i[keep], j[keep]
+
+    def orient(p, q, r):
+        return (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
+
+    o1 = orient(a[i], b[i], a[j])
+    o2 = orient(a[i], b[i], b[j])
+    o3 = orient(a[j], b[j], a[i])
+    o4 = orient(a[j], b[j], b[i])
+    eps = 1e-14 * (1 + np.abs(b - a).max()) ** 2
+    hit = (o1 * o2 < -eps) & (o3 * o4 < -eps)
+    i, j = i[hit], j[hit]
+    t = o3[hit] / (o3[hit] - o4[hit])  # (orient of segment j's line at a[i] and b[i])
+    return i, j, t
+
+
+MAX_GRID_PAIRS = 20_000_000  # candidate segment pairs at most (~1 GB of scratch); more is refused
+
+
+def _grid_pairs(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(i, j), i < j: the segment pairs (a[k], b[k]) whose bounding boxes share a grid cell; the
+    cell is about twice the median segment length, so a segment covers a few cells."""
+    m = len(a)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    span = float(np.max(hi.max(axis=0) - lo.min(axis=0))) or 1.0
+    cell = max(2.0 * float(np.median(np.linalg.norm(b - a, axis=1))), span / 4096, 1e-12)
+    c0 = np.floor((lo - lo.min(axis=0)) / cell).astype(np.int64)
+    c1 = np.floor((hi - lo.min(axis=0)) / cell).astype(np.int64)
+    nx, ny = c1[:, 0] - c0[:, 0] + 1, c1[:, 1] - c0[:, 1] + 1
+    per = nx * ny
+    if per.sum() > 64 * m + 1_000_000:
+        raise InputError(f"an outline of {m:,} segments is too intricate to check (long segments across "
+                         "a dense outline): simplify the pattern")
+    seg = np.repeat(np.arange(m), per)
+    k = np.arange(len(seg)) - np.repeat(np.cumsum(per) - per, per)  # index of the cell within its box
+    cx = np.repeat(c0[:, 0], per) + k % np.repeat(nx, per)
+    cy = np.repeat(c0[:, 1], per) + k // np.repeat(nx, per)
+    key = cx * (int(c1[:, 1].max()) + 1) + cy
+    order = np.lexsort((seg, key))
+    key, seg = key[order], seg[order]
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])  # runs of one cell
+    lens = np.diff(np.r_[starts, len(key)])
+    if int((lens * (lens - 1) // 2).sum()) > MAX_GRID_PAIRS:
+        raise InputError(f"an outline of {m:,} segments has too many overlapping segments to check: "
+                         "simplify the pattern")
+    after = np.repeat(lens, lens) - (np.arange(len(key)) - np.repeat(starts, lens)) - 1  # partners behind
+    p, d, pi, pj = np.flatnonzero(after > 0), 1, [], []
+    while len(p):  # each member with the one d places behind it in its run: work ~ the pairs
+        pi.append(seg[p])
+        pj.append(seg[p + d])
+        d += 1
+        p = p[after[p] >= d]
+    if not pi:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    i, j = np.concatenate(pi), np.concatenate(pj)
+    return np.minimum(i, j), np.maximum(i, j)
+
+

@@ -2,7 +2,7 @@
 
 A spec holds `pattern.panels` (2D outline vertices, edges with optional curvature, a 3D
 translation and rotation that place the flat panel around the body), `pattern.stitches` (pairs
-of {panel, edge} sewn together) and `properties` (`units_in_meter`, `curvature_coords`).
+of {panel, edge} sewn together, with GarmentCode's optional sewing side) and `properties` (`units_in_meter`, `curvature_coords`).
 GarmentCode fields we do not use (`parameters`, `parameter_order`, ...) are kept so a pattern
 written back out is still a GarmentCode spec. Our own additions (fabric, placement hints) live
 in an optional top-level `tryon` block that GarmentCode ignores.
@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_serializer, model_validator
 
 
 class Curvature(BaseModel):
@@ -83,10 +83,40 @@ class StitchSide(BaseModel):
     edge: int
 
 
+class Stitch(BaseModel):
+    """Two edges sewn together, written [a, b] or [a, b, side] as GarmentCode writes them. `side`:
+    GarmentCode's sewing orientation -- "right_wrong": one panel's right side to the other's wrong
+    side (its collars), where a plain stitch joins right side to right side; kept as written."""
+
+    model_config = ConfigDict(extra="forbid")
+    a: StitchSide
+    b: StitchSide
+    side: str | None = None
+
+    @model_validator(mode="before")
+    @classmethod
+    def _from_list(cls, v: Any) -> Any:
+        if isinstance(v, (list, tuple)):
+            if len(v) not in (2, 3):
+                raise ValueError(f"a stitch is [edge, edge] or [edge, edge, side], got {len(v)} items")
+            if len(v) == 3 and not isinstance(v[2], str):
+                raise ValueError(f"a stitch's third item is its sewing side (a name), got {v[2]!r}")
+            return {"a": v[0], "b": v[1], "side": v[2] if len(v) == 3 else None}
+        return v
+
+    @model_serializer
+    def _as_list(self) -> list:
+        pair = [self.a.model_dump(), self.b.model_dump()]
+        return pair + [self.side] if self.side is not None else pair
+
+    def __iter__(self):  # (a, b = stitch)
+        return iter((self.a, self.b))
+
+
 class PatternBody(BaseModel):
     model_config = ConfigDict(extra="allow")
     panels: dict[str, Panel]
-    stitches: list[tuple[StitchSide, StitchSide]] = Field(default_factory=list)
+    stitches: list[Stitch] = Field(default_factory=list)
     panel_order: list[str] | None = None
 
     @field_validator("panels")

@@ -1,8 +1,10 @@
 """Checks a pattern before anything is simulated. Each problem names the panel and the edge.
 
-Errors make the pattern unusable (a stitch naming a missing panel or edge, stitched edges whose
-lengths differ by more than 10 %, a self-intersecting or open outline, a degenerate edge);
-warnings are shown but do not stop a run (an edge sewn twice, a very small panel).
+Errors make the pattern unusable (a stitch naming a missing panel or edge, an open outline, a
+degenerate edge, non-finite numbers, edges gathered past MAX_GATHER); warnings are shown but do
+not stop a run (an edge sewn twice, a very small panel, an outline that crosses itself a few
+times -- meshed as GarmentCode draws it, engine.garment.mesh). Stitched edges of different lengths are a gather:
+the longer is sewn evenly into the shorter.
 """
 
 from __future__ import annotations
@@ -15,7 +17,8 @@ from engine.errors import InputError, parser
 from engine.pattern import geometry as geo
 from engine.pattern.spec import PatternSpec
 
-SEAM_LENGTH_TOLERANCE = 0.10  # stitched edges may differ by this fraction (ease, gathering)
+MAX_GATHER = 4.0  # a stitched edge at most this many times the length of the edge it is sewn to
+MAX_CROSSINGS = 8  # pairs of edges of an outline that cross: more is not a drawing but a mix-up
 MAX_EDGES = 20_000  # in a whole pattern: garments have hundreds; a large DXF a few thousand
 
 
@@ -70,11 +73,11 @@ def validate(spec: PatternSpec) -> list[Problem]:
         pa, pb = panels[a.panel], panels[b.panel]
         la = geo.edge_length(pa, pa.edges[a.edge], scale, rel)
         lb = geo.edge_length(pb, pb.edges[b.edge], scale, rel)
-        if max(la, lb) > 0 and abs(la - lb) / max(la, lb) > SEAM_LENGTH_TOLERANCE:
+        if max(la, lb) > MAX_GATHER * min(la, lb):
             out.append(Problem("error", a.panel, a.edge,
-                               f"stitch {k}: this edge is {la * 100:.1f} cm long but panel '{b.panel}' "
-                               f"edge {b.edge} is {lb * 100:.1f} cm (differ by more than "
-                               f"{SEAM_LENGTH_TOLERANCE:.0%}); make the stitched edges the same length"))
+                               f"stitch {k}: this edge is {la * 100:.1f} cm long and panel '{b.panel}' edge "
+                               f"{b.edge} {lb * 100:.1f} cm: more than {MAX_GATHER:g} x gathered into the "
+                               "other; check the stitch's edges"))
     out.sort(key=lambda p: p.level != "error")
     return out
 
@@ -110,80 +113,29 @@ def _check_panel(name: str, panel, scale: float, rel: bool) -> list[Problem]:
     except InputError as e:  # too intricate to check: said for this panel
         return [Problem("error", name, None, str(e))]
     if crossing is not None:
-        i, j = crossing
-        out.append(Problem("error", name, i, f"outline crosses itself (edge {i} crosses edge {j})"))
+        i, j, n = crossing
+        if n > MAX_CROSSINGS:
+            out.append(Problem("error", name, i, f"outline crosses itself between {n} pairs of edges (edge {i} "
+                                                 f"crosses edge {j}): check the order of its vertices and edges"))
+        else:
+            out.append(Problem("warning", name, i, f"outline crosses itself (edge {i} crosses edge {j}): meshed "
+                                                   "as GarmentCode draws it, its parts joined where the edges cross"))
     area = abs(geo.signed_area(poly))
     if area < 1e-4:
         out.append(Problem("warning", name, None, f"very small panel ({area * 1e4:.2f} cm^2)"))
     return out
 
 
-def _self_intersection(poly: np.ndarray, seg_edge: np.ndarray) -> tuple[int, int] | None:
-    """First pair (smallest first segment, then second) of non-adjacent outline segments that
-    properly cross, as (edge, edge); seg_edge: (M,) the edge each outline segment belongs to.
-    Only segments that share a cell of a uniform grid are tested: near-linear in M for outlines
-    (all pairs at once took minutes and gigabytes for a DXF of thousands of edges)."""
-    m = len(poly)
-    a, b = poly, np.roll(poly, -1, axis=0)
-    i, j = _grid_pairs(a, b)
-    keep = (j - i >= 2) & ~((i == 0) & (j == m - 1))  # neighbours share a vertex
-    i, j = i[keep], j[keep]
-
-    def orient(p, q, r):
-        return (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
-
-    o1 = orient(a[i], b[i], a[j])
-    o2 = orient(a[i], b[i], b[j])
-    o3 = orient(a[j], b[j], a[i])
-    o4 = orient(a[j], b[j], b[i])
-    eps = 1e-14 * (1 + np.abs(b - a).max()) ** 2
-    hit = (o1 * o2 < -eps) & (o3 * o4 < -eps)
-    if not hit.any():
+def _self_intersection(poly: np.ndarray, seg_edge: np.ndarray) -> tuple[int, int, int] | None:
+    """The first pair (smallest first segment, then second) of non-adjacent outline segments that
+    properly cross, as (edge, edge, how many crossings in all); seg_edge: (M,) the edge each
+    outline segment belongs to."""
+    i, j, _ = geo.segment_crossings(poly)
+    if not len(i):
         return None
-    k = np.lexsort((j[hit], i[hit]))[0]
-    return int(seg_edge[i[hit][k]]), int(seg_edge[j[hit][k]])
-
-
-MAX_GRID_PAIRS = 20_000_000  # candidate segment pairs at most (~1 GB of scratch); more is refused
-
-
-def _grid_pairs(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(i, j), i < j: the segment pairs (a[k], b[k]) whose bounding boxes share a grid cell; the
-    cell is about twice the median segment length, so a segment covers a few cells."""
-    m = len(a)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    span = float(np.max(hi.max(axis=0) - lo.min(axis=0))) or 1.0
-    cell = max(2.0 * float(np.median(np.linalg.norm(b - a, axis=1))), span / 4096, 1e-12)
-    c0 = np.floor((lo - lo.min(axis=0)) / cell).astype(np.int64)
-    c1 = np.floor((hi - lo.min(axis=0)) / cell).astype(np.int64)
-    nx, ny = c1[:, 0] - c0[:, 0] + 1, c1[:, 1] - c0[:, 1] + 1
-    per = nx * ny
-    if per.sum() > 64 * m + 1_000_000:
-        raise InputError(f"an outline of {m:,} segments is too intricate to check (long segments across "
-                         "a dense outline): simplify the pattern")
-    seg = np.repeat(np.arange(m), per)
-    k = np.arange(len(seg)) - np.repeat(np.cumsum(per) - per, per)  # index of the cell within its box
-    cx = np.repeat(c0[:, 0], per) + k % np.repeat(nx, per)
-    cy = np.repeat(c0[:, 1], per) + k // np.repeat(nx, per)
-    key = cx * (int(c1[:, 1].max()) + 1) + cy
-    order = np.lexsort((seg, key))
-    key, seg = key[order], seg[order]
-    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])  # runs of one cell
-    lens = np.diff(np.r_[starts, len(key)])
-    if int((lens * (lens - 1) // 2).sum()) > MAX_GRID_PAIRS:
-        raise InputError(f"an outline of {m:,} segments has too many overlapping segments to check: "
-                         "simplify the pattern")
-    after = np.repeat(lens, lens) - (np.arange(len(key)) - np.repeat(starts, lens)) - 1  # partners behind
-    p, d, pi, pj = np.flatnonzero(after > 0), 1, [], []
-    while len(p):  # each member with the one d places behind it in its run: work ~ the pairs
-        pi.append(seg[p])
-        pj.append(seg[p + d])
-        d += 1
-        p = p[after[p] >= d]
-    if not pi:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    i, j = np.concatenate(pi), np.concatenate(pj)
-    return np.minimum(i, j), np.maximum(i, j)
+    k = np.lexsort((j, i))[0]
+    pairs = len({(int(a), int(b)) for a, b in zip(seg_edge[i], seg_edge[j])})  # (a curve may graze another)
+    return int(seg_edge[i[k]]), int(seg_edge[j[k]]), pairs
 
 
 @parser("a pattern", name_of=lambda spec, source="pattern": source)

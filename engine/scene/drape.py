@@ -27,7 +27,7 @@ from typing import Callable
 
 import numpy as np
 
-from engine.cloth.config import Control, Sewing, StepConfig
+from engine.cloth.config import Attachment, Control, Sewing, StepConfig
 from engine.cloth.fabrics import get_fabric
 from engine.cloth.model import FLEXION, ClothModel, ClothState, build_model, weld_model
 from engine.cloth.solver import ClothSolver, FireRelaxer
@@ -36,6 +36,7 @@ from engine.collide.base import Collider
 from engine.errors import SimulationError
 from engine.garment.garment import Garment
 from engine.scene.request import TryOnOptions
+from engine.scene.attach import welded
 from engine.scene.tuning import Tuning
 
 FELL_BELOW = -0.05  # m: cloth wholly below this height has fallen off the body (feet stand on y = 0)
@@ -104,6 +105,7 @@ class _Dressing:
     tuning: Tuning
     progress: Progress
     observer: Observer | None
+    attachment: Attachment | None = None  # labelled edges held while sewing (engine.scene.attach)
 
     def solver(self, model: ClothModel) -> ClothSolver:
         return ClothSolver(model, self.collider, dressing_config(self.request, self.tuning), dt=self.request.dt,
@@ -126,13 +128,16 @@ class _Sewn:
     snapped: int  # pairs welded where they stuck
     gravity: float  # the gravity scale sewing ended with
     every: int  # steps between collision checks
+    attachment: Attachment | None  # on the welded cloth
 
 
 def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOptions = TryOnOptions(),
-                  tuning: Tuning = Tuning(), progress: Progress = _noop, observer: Observer | None = None) -> DrapeResult:
-    """Sew the placed panels, then drape them, against the same collider (module doc)."""
+                  tuning: Tuning = Tuning(), progress: Progress = _noop, observer: Observer | None = None,
+                  attachment: Attachment | None = None) -> DrapeResult:
+    """Sew the placed panels, then drape them, against the same collider (module doc). attachment:
+    vertices held on planes while sewing and draping (engine.scene.attach)."""
     tuning.validate()
-    job = _Dressing(garment, collider, request, tuning, progress, observer)
+    job = _Dressing(garment, collider, request, tuning, progress, observer, attachment)
     model = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
                         get_fabric(request.fabric), _edge(garment), tuning.cloth)
     state = job.fresh_state()
@@ -143,7 +148,8 @@ def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOpt
     if sewn is not None:
         model, state, solver = sewn.model, sewn.state, sewn.solver
     res = drape(model, state, collider, request, tuning, progress, observer,
-                gravity_from=sewn.gravity if sewn else 0.0, solver=solver)
+                gravity_from=sewn.gravity if sewn else 0.0, solver=solver,
+                attachment=sewn.attachment if sewn else attachment)
     cloth_t = dict(sewn.timing) if sewn else {"cloth": 0.0, "collision": 0.0}
     for k in cloth_t:
         cloth_t[k] += res.timing[f"{k}_total"]
@@ -175,7 +181,10 @@ def _sew(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSolv
             state, solver = job.fresh_state(), job.solver(model)
             job.progress("sewing", 0.0, f"the seams stopped closing: sewing again, pulled at {vmax:g} m/s")
         control = Control(friction_scale=t.friction or 0.0, collide_every=_sew_every(job.tuning, dt, vmax),
-                          sewing=Sewing(pairs, np.zeros(len(pairs), dtype=np.bool_), t.tau, vmax))
+                          sewing=Sewing(pairs, np.zeros(len(pairs), dtype=np.bool_), t.tau, vmax,
+                                        panel=garment.panel.astype(np.int64) if far else None,
+                                        panel_damping=t.far_panel_damping),
+                          attachment=job.attachment)
         pull = _pull(job, model, state, solver, control, far, retry=attempt + 1 < len(pulls), gap0=gap0)
         if pull.welded.all():
             break
@@ -195,7 +204,8 @@ def _sew(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSolv
     model = weld_model(model, vmap, garment.uv if t.seam_flexion else None)
     state = ClothState(x_new / w[:, None], v_new / w[:, None])
     return _Sewn(model=model, state=state, solver=job.solver(model), iterations=its, timing=timing,
-                 gap_max=pull.gap_max, snapped=pull.snapped, gravity=pull.gravity, every=int(control.collide_every))
+                 gap_max=pull.gap_max, snapped=pull.snapped, gravity=pull.gravity, every=int(control.collide_every),
+                 attachment=welded(job.attachment, vmap))
 
 
 @dataclass
@@ -297,12 +307,14 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
 
 def drape(model: ClothModel, state: ClothState, collider: Collider | None, request: TryOnOptions = TryOnOptions(),
           tuning: Tuning = Tuning(), progress: Progress = _noop, observer: Observer | None = None,
-          gravity_from: float = 1.0, solver: ClothSolver | None = None) -> DrapeResult:
+          gravity_from: float = 1.0, solver: ClothSolver | None = None,
+          attachment: Attachment | None = None) -> DrapeResult:
     """The drape stage alone (module doc), from `state` (changed in place) of the sewn `model`:
     until the shape stops moving, or the budget ends; a garment left stretched past the fabric's
     threshold + too_tight is refused. Gravity grows from `gravity_from` x g over the rest of the
     ramp. `solver` (of this model and collider) carries its iteration count and timing on.
-    The result's seam fields are zero (no seams are open in a sewn model)."""
+    attachment: vertices kept in front of planes (engine.scene.attach) until the cloth first
+    settles; then it is let go and settles again. The result's seam fields are zero (no seams are open in a sewn model)."""
     t = tuning.drape
     tuning.validate()
     fabric = get_fabric(request.fabric)
@@ -312,7 +324,8 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
     dt = solver.dt
     every = _drape_every(tuning, dt)
     fire = FireRelaxer() if t.relax == "fire" else None
-    control = Control(damping_scale=t.fire_damping if fire is not None else t.damping, collide_every=every)
+    control = Control(damping_scale=t.fire_damping if fire is not None else t.damping, collide_every=every,
+                      attachment=attachment)
     ramp = tuning.sew.gravity_ramp if fire is None else min(tuning.sew.gravity_ramp, t.fire_ramp)
     t0 = time.perf_counter()
     it0 = solver.iterations
@@ -369,8 +382,14 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
             guard_share = sum(guards) / window
             full = gravity_from + (it + 1 - window) * dt / ramp >= 1.0  # the last window at full g
             if max(older, drift) < t.settle_speed and it >= min_it and full:
-                settled = True
-                break
+                if control.attachment is None:
+                    settled = True
+                    break
+                # settled while held: let go (as GarmentCode's simulator does after its first
+                # frames) and settle again free -- a garment too wide to stay up slides down now
+                control.attachment = None
+                snaps.clear()
+                snaps.append(state.x.copy())
     strain = solver.max_strain(state)
     if strain > refuse:
         raise _too_small(state, model, strain, fabric, "after draping it is stretched")

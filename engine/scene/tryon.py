@@ -21,6 +21,7 @@ from engine.garment.garment import Garment, build_garment
 from engine.pattern.spec import PatternSpec
 from engine.scene.drape import DrapeResult, Progress, most_stretched, sew_and_drape
 from engine.scene.garments import PATTERN_SIZE_ADVICE, dress_in_size
+from engine.scene.attach import attachment
 from engine.scene.request import TryOnOptions, TryOnRequest
 from engine.scene.tuning import Tuning
 
@@ -116,8 +117,9 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
                 bv, shown[0] = lift.raised.vertices, True
             watch(stage, x, tri, bv)
     bvh = bvh_job.result()  # (done before the solver and its query helper thread start)
+    held, held_note = attachment(garment, body)
     try:
-        res = sew_and_drape(garment, collider, request, tuning, progress, observer=observer)
+        res = sew_and_drape(garment, collider, request, tuning, progress, observer=observer, attachment=held)
     except SimulationError as e:
         _carried_hint(e, placement_note)
         raise
@@ -165,6 +167,7 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
         "collision_maps": map_info,
         "left_out": plan.left_out,
         **({"placement": placement_note} if placement_note else {}),
+        **({"attachment": held_note} if held_note else {}),
         "sew_friction": {"scale": float(tuning.sew.friction),
                          "why": sew_note or ("asked for" if tuning.sew.friction else "the panels slide into place")},
         "tight": bool(res.strain_max > fab.strain_threshold + TIGHT),

@@ -1,0 +1,76 @@
+"""GarmentCode's attachments: its simulator keeps some labelled edges of a pattern from sliding
+while the panels are sewn -- the top of a lower garment ("lower_interface") and of a strapless
+top ("strapless_top") from sliding down the body, a collar's ends ("right_collar",
+"left_collar") from sliding off the neck -- each vertex on one side of a plane (a one-sided
+constraint), for its first frames, then lets go. Here the same (engine.cloth.welds.hold_on_planes):
+each labelled vertex kept from going below (or, a collar's, further out than) where the
+placement put it -- the pattern's own placement on the body it was made for, else the one
+carried onto this body by its landmarks (engine.garment.place) -- while the garment is sewn and
+until it has settled once; then the drape lets go and lets it settle free (engine.scene.drape)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from engine.body.types import Body
+from engine.cloth.config import Attachment
+from engine.errors import TryonError
+from engine.garment.garment import Garment
+
+# how firmly each label is held: (s to bring a vertex back to its plane, at most m/s)
+HOLD = {"lower_interface": (0.05, 1.0), "strapless_top": (0.05, 1.0), "right_collar": (0.1, 0.3),
+        "left_collar": (0.1, 0.3)}
+SLACK = 0.01  # m: a held vertex may settle this far below (outside) where it was placed
+NECK_INSIDE = 0.01  # m: a collar's ends kept no further out than this inside the neck's half width
+
+
+def attachment(garment: Garment, body: Body) -> tuple[Attachment | None, str | None]:
+    """The attachment of the garment's labelled edges on this body, and what the report says of
+    it (None, None: no labelled edge)."""
+    from engine.body.measure import measure
+    from engine.pattern.catalogue import neck_half_width
+
+    x = garment.positions
+    idx, points, normals, tau, vmax, said = [], [], [], [], [], []
+
+    def hold(label: str, v: np.ndarray, p: np.ndarray, n: tuple, what: str) -> None:
+        idx.append(v)
+        points.append(p)
+        normals.append(np.tile(n, (len(v), 1)))
+        tau.append(np.full(len(v), HOLD[label][0]))
+        vmax.append(np.full(len(v), HOLD[label][1]))
+        said.append(f"'{label}' {what}")
+
+    for label in ("lower_interface", "strapless_top"):
+        v = garment.labelled.get(label)
+        if v is not None and len(v):
+            hold(label, v, x[v] - [0.0, SLACK, 0.0], (0.0, 1.0, 0.0), "from sliding down")
+    collar = [lb for lb in ("right_collar", "left_collar") if len(garment.labelled.get(lb, ()))]
+    if collar:
+        try:  # the neck's half width just above the shoulders: the bound a collar end keeps inside
+            half = neck_half_width(body, measure(body).shoulder_height + 0.05) - NECK_INSIDE
+        except TryonError:
+            half = np.nan
+        for label in collar:
+            v = garment.labelled[label]
+            side = -1.0 if label == "right_collar" else 1.0  # GarmentCode's right is the body's -x
+            out = side * x[v, 0]  # how far out each vertex was placed
+            bound = np.maximum(out, half) if np.isfinite(half) else out
+            p = np.zeros((len(v), 3))
+            p[:, 0] = side * (bound + SLACK)
+            hold(label, v, p, (-side, 0.0, 0.0), "from sliding off the neck")
+    if not idx:
+        return None, None
+    att = Attachment(vertices=np.concatenate(idx).astype(np.int64), points=np.concatenate(points),
+                     normals=np.concatenate(normals).astype(np.float64), tau=np.concatenate(tau),
+                     vmax=np.concatenate(vmax))
+    return att, f"kept {', '.join(said)} while sewn and until first settled, as GarmentCode's simulator holds them"
+
+
+def welded(att: Attachment | None, vertex_map: np.ndarray) -> Attachment | None:
+    """The attachment on the welded cloth (vertex_map: old -> new vertex), each vertex once."""
+    if att is None:
+        return None
+    new, first = np.unique(vertex_map[att.vertices], return_index=True)
+    return Attachment(vertices=new.astype(np.int64), points=att.points[first], normals=att.normals[first],
+                      tau=att.tau[first], vmax=att.vmax[first])
