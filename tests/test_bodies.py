@@ -110,21 +110,36 @@ def test_measurements_with_the_arms_down_or_held_out(tmp_path, variant):
             assert np.isnan(m.arm_gap), (spec, m.arm_gap)
 
 
-def test_a_body_with_no_crotch_nor_armpits_is_measured_with_notes():
-    """A shape with its legs together and its arms pressed to it (a capsule): the crotch, armpits
-    and shoulders are not found, each said with why, and their heights estimated from the stature
-    so that what needs them can go on."""
+def _capsule():
     import trimesh
 
     from engine.body.types import Body
 
     c = trimesh.creation.capsule(height=1.4, radius=0.15, count=[32, 32])
     v = np.asarray(c.vertices)[:, [0, 2, 1]]
-    m = measure(Body(v - np.array([0.0, v[:, 1].min(), 0.0]), np.asarray(c.faces)))
+    return Body(v - np.array([0.0, v[:, 1].min(), 0.0]), np.asarray(c.faces))
+
+
+def test_a_body_with_no_crotch_nor_armpits_is_measured_with_notes():
+    """A shape with its legs together and its arms pressed to it (a capsule): the crotch, armpits
+    and shoulders are not found, each said with why, and their heights estimated from the stature
+    so that what needs them can go on."""
+    m = measure(_capsule())
     for what in ("crotch height", "armpit height", "shoulder height"):
         assert any(n.startswith(f"{what} estimated") for n in m.notes), m.notes
     assert any(n.startswith("could not find the crotch: the legs are not apart") for n in m.notes)
     assert ordered(m) and np.isfinite(m.waist) and np.isnan(m.shoulder_width)
+
+
+def test_a_shape_with_no_landmark_of_a_person_gets_no_skeleton():
+    """Neither crotch, armpits nor shoulders found (a capsule): refused with why before the build
+    search (an animation's first frame is fitted as it loads; the search made each such upload
+    take seconds, only to refuse it)."""
+    from engine.body.fit import fit_rig
+    from engine.errors import InputError
+
+    with pytest.raises(InputError, match="neither its crotch, its armpits nor its shoulders were found"):
+        fit_rig(_capsule())
 
 
 def test_a_male_scan_gets_the_male_skeleton_of_its_build(tmp_path):

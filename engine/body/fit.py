@@ -102,6 +102,12 @@ def fit_rig(scan: Body, preset: str | None = None) -> Body:
     if not (1.40 <= h <= 2.10):
         raise InputError(f"the scan is {h:.2f} m tall; fitting a skeleton needs a standing adult of 1.40 .. 2.10 m")
     ms = measure(scan)
+    if {"crotch height", "armpit height", "shoulder height"} <= set(ms.estimated):
+        # no landmark of a person found (a capsule, a box): refused before the build search's
+        # seconds, which would only end in the refusal below
+        raise InputError("the default skeleton does not fit this body: neither its crotch, its armpits nor its "
+                         f"shoulders were found ({'; '.join(ms.notes)}); it should be a standing person, legs apart "
+                         "and arms apart from the body")
     notes = []
     if preset is None:
         preset = body_sex(scan, ms)

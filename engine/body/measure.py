@@ -208,6 +208,7 @@ class Measurements:
     hand_gap: float = float("nan")  # the smallest gap between an arm hanging below the waist and
     # the torso or legs beside it (0 where they touch or overlap; NaN: no arm reaches there)
     notes: list[str] = field(default_factory=list)
+    estimated: list[str] = field(default_factory=list)  # landmarks not found, estimated from the stature
 
     def to_dict(self) -> dict:
         """Centimetres rounded to 0.1 (None where not measurable), plus "units": "cm"."""
@@ -378,6 +379,7 @@ PROPORTIONS = {"crotch": 0.46, "armpit": 0.755, "shoulder_over_armpit": 0.075}
 
 def _estimated(m: Measurements, what: str, value: float) -> float:
     m.notes.append(f"{what} estimated as {100 * value:.1f} cm from the stature (not found: see above)")
+    m.estimated.append(what)
     return float(value)
 
 
