@@ -24,7 +24,8 @@ class DefaultBodyIn(BaseModel):
 
 
 class TryOnIn(TryOnRequest):
-    """A try-on: the engine's request (what `tryon drape`/`tryon walk` take) on a body of yours."""
+    """A try-on: the engine's request (what `tryon drape`/`tryon walk` take) on a body of yours.
+    (`assembly` and `units` go with a DXF upload, POST /api/garments, not here.)"""
 
     body_id: str | None = Field(None, description="a body you created; or give `body`")
     body: str | None = Field(None, description="a default body spec, e.g. default:female,height=1.7")
@@ -34,8 +35,15 @@ def body_public(row: dict) -> dict:
     return {"id": row["id"], "kind": row["kind"], "name": row["name"], "info": json.loads(row["info"] or "{}")}
 
 
-def garment_public(row: dict) -> dict:
-    return {"id": row["id"], "name": row["name"], "info": json.loads(row["info"] or "{}")}
+def garment_public(row: dict, key: str) -> dict:
+    """An uploaded pattern as the API shows it: its info and, for a DXF, links to its seam
+    picture (`pattern_svg`, in its default size; add `&size=` for another of its sizes) signed with
+    the garment's `key`, and to the assembly it is sewn by."""
+    out = {"id": row["id"], "name": row["name"], "info": json.loads(row["info"] or "{}")}
+    if Path(row["file"]).suffix.lower() == ".dxf":
+        base = f"/api/garments/{row['id']}"
+        out["links"] = {"pattern_svg": f"{base}/pattern.svg?key={key}", "assembly": f"{base}/assembly.json"}
+    return out
 
 
 def job_public(row: dict, data_dir: Path, key: str) -> dict:

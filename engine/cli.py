@@ -166,7 +166,8 @@ def _progress_printer():
 # the request's fields by their options here (engine.scene.request.TryOnRequest)
 OPTION_NAMES = {"resolution_cm": "--resolution", "texel_mm": "--texel", "dt_ms": "--dt",
                 "reuse_maps": "--reuse-maps/--maps-every-frame", "walk_stiffness": "--walk-stiffness"}
-DRESSING = ("garment", "size", "fabric", "resolution_cm", "texel_mm", "collision", "velocity_mode")
+DRESSING = ("garment", "size", "assembly", "units", "fabric", "resolution_cm", "texel_mm", "collision",
+            "velocity_mode")
 WALKING = ("seconds", "fps", "speed", "stride", "in_place", "walk_stiffness", "reuse_maps")
 
 

@@ -112,6 +112,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--patterns", type=Path, help="drape these *_specification.json instead of drawing")
     ap.add_argument("--resolution", type=float, default=1.5, help="cloth edge, cm")
+    ap.add_argument("--fabric", default=None, help="drape in this fabric (default: the try-on's default)")
     ap.add_argument("--out", type=Path, default=Path("out/bench_garmentcode"))
     a = ap.parse_args()
     if not (1 <= a.n <= 1000):
@@ -123,7 +124,7 @@ def main() -> None:
     paths = sorted(a.patterns.glob("*_specification.json")) if a.patterns else \
         draw(a.body if a.body in BODIES else "mean_female", a.n, a.seed, a.out / "patterns")
     body = resolve_body(str(BODIES.get(a.body, a.body)))
-    request = TryOnOptions(resolution_cm=a.resolution)
+    request = TryOnOptions(resolution_cm=a.resolution, **({"fabric": a.fabric} if a.fabric else {}))
     rows = []
     for p in paths:
         r = drape_one(p, body, request)

@@ -81,7 +81,7 @@ def test_upload_body_and_pattern(idle):
     r = idle.post("/api/garments", files={"file": ("bad.json", b"{nope")}, headers=h)
     assert r.status_code == 400 and "JSON" in r.json()["error"]
     r = idle.post("/api/garments", files={"file": ("pieces.dxf", b"0\nSECTION\n")}, headers=h)
-    assert r.status_code == 400 and "tryon pattern import" in r.json()["error"]
+    assert r.status_code == 400 and "pieces.dxf" in r.json()["error"], r.text
     g = idle.get("/api/garments", headers=h).json()
     assert "dress" in [x["name"] for x in g["catalogue"]] and "M" in g["sizes"] and "silk" in g["fabrics"]
     assert g["sizes"][-1] == "auto"  # the smallest size that covers the body's girths
@@ -89,13 +89,14 @@ def test_upload_body_and_pattern(idle):
 
 
 def test_upload_a_dxf_pattern_with_its_assembly(idle, tmp_path):
-    """A shop's DXF cutting pattern and its assembly file (stitches, placement) become a pattern
-    the try-on can use; the uploads are converted to GarmentCode JSON and not kept. Without the
-    assembly, with a damaged DXF or a bad assembly: a clear 400 naming the client's file."""
+    """A DXF cutting pattern and its assembly file (stitches, placement): stored as uploaded, the
+    assembly saying how it is sewn; its picture shows the pieces. A DXF whose pieces make no
+    garment the inference knows, alone: 400 asking for its assembly. A damaged DXF or a bad
+    assembly: a clear 400 naming the client's file; nothing is kept of a refused upload."""
     import json
 
     from engine.pattern.dxf import assembly_of, write_dxf
-    from engine.pattern.io import load_pattern, parse_pattern
+    from engine.pattern.io import load_pattern
 
     h = token(idle)
     spec = load_pattern(SAMPLE_SKIRT)
@@ -106,29 +107,80 @@ def test_upload_a_dxf_pattern_with_its_assembly(idle, tmp_path):
                   headers=h)
     assert r.status_code == 201, r.text
     g = r.json()
-    assert g["name"] == "My Skirt" and g["info"]["from"] == "dxf"
-    assert g["info"]["panels"] == len(spec.pattern.panels)
+    assert g["name"] == "My Skirt" and g["info"]["from"] == "dxf" and g["info"]["assembly"] == "yours"
+    assert g["info"]["panels"] == len(spec.pattern.panels) and g["info"]["sizes"] == ["one size"]
     uploads = idle.app.state.settings.data_dir / "uploads"
-    assert [p.name for p in uploads.iterdir()] == [f"pattern-{g['id']}.json"]
-    back = parse_pattern((uploads / f"pattern-{g['id']}.json").read_bytes(), source="stored")
-    assert list(back.pattern.panels) == list(spec.pattern.panels)
-    assert len(back.pattern.stitches) == len(spec.pattern.stitches)
+    folder = uploads / f"garment-{g['id']}"
+    assert [p.name for p in uploads.iterdir()] == [folder.name]
+    assert (folder / "assembly.json").read_bytes() == asm and (folder / "pattern.dxf").read_bytes() == dxf
+    assert idle.get(g["links"]["pattern_svg"]).text.startswith("<svg")
+    assert idle.get(g["links"]["assembly"], headers=h).json()["stitches"] == json.loads(asm)["stitches"]
     bid = idle.post("/api/bodies/default", json={"preset": "female"}, headers=h).json()["id"]
     r = idle.post("/api/tryons", json={"body_id": bid, "garment": g["id"]}, headers=h)
-    assert r.status_code == 202 and r.json()["request"]["garment"]["label"] == "My Skirt", r.text
+    assert r.status_code == 202, r.text
+    assert r.json()["request"]["garment"]["dxf"]["assembly"] == str(folder / "assembly.json")
 
     r = idle.post("/api/garments", files={"file": ("skirt.dxf", dxf)}, headers=h)
-    assert r.status_code == 400 and "assembly" in r.json()["error"], r.text
+    assert r.status_code == 400 and "upload its assembly file" in r.json()["error"], r.text
     r = idle.post("/api/garments", files={"file": ("broken.dxf", b"0\nSECTION\n2\nENTITIES\n"),
                                           "assembly": ("a.json", asm)}, headers=h)
-    assert r.status_code == 400 and "broken.dxf" in r.json()["error"] and "pattern-" not in r.json()["error"], r.text
+    assert r.status_code == 400 and "broken.dxf" in r.json()["error"] and "pattern.dxf" not in r.json()["error"], r.text
     r = idle.post("/api/garments", files={"file": ("skirt.dxf", dxf), "assembly": ("a.json", b'{"stitches": 3}')},
                   headers=h)
     assert r.status_code == 400 and "a.json" in r.json()["error"] and "invalid assembly" in r.json()["error"], r.text
     r = idle.post("/api/garments", files={"file": ("skirt.json", SAMPLE_SKIRT.read_bytes()),
                                           "assembly": ("a.json", asm)}, headers=h)
     assert r.status_code == 400 and "DXF" in r.json()["error"], r.text
-    assert [p.name for p in uploads.iterdir()] == [f"pattern-{g['id']}.json"]  # nothing left of the refused
+    assert [p.name for p in uploads.iterdir()] == [folder.name]  # nothing left of the refused
+    assert idle.delete(f"/api/garments/{g['id']}", headers=h).status_code == 204
+    assert list(uploads.iterdir()) == []
+
+
+def test_a_dxf_alone_gives_its_sizes_seams_and_pictures(idle):
+    """A shop's DXF alone (leggings graded in 14 sizes, no assembly): its sizes in the file's
+    order, pieces, the garment inferred and what the inference is unsure of, the fabric its
+    pieces suggest, a signed link to the seam picture of any of its sizes (drawn in the fence
+    when first asked for); a try-on takes its own size names or auto, and nothing else."""
+    from tests.samples import DXF_SAMPLES
+
+    h = token(idle)
+    dxf = (DXF_SAMPLES / "ORILEGWB_AAMA.DXF").read_bytes()
+    r = idle.post("/api/garments", files={"file": ("Leggings.DXF", dxf)}, headers=h)
+    assert r.status_code == 201, r.text
+    g = r.json()
+    i = g["info"]
+    assert i["sizes"] == [str(k) for k in range(26, 54, 2)] and i["size"] == "36" and i["units"] == "mm"
+    assert [p["name"] for p in i["pieces"]] == ["ORILEG WB WB", "ORILEG WB LL"]
+    assert i["garment"]["kind"] == "bottom" and i["garment"]["panels"] == ["leg_l", "leg_r", "waistband"]
+    assert {"front rise", "back rise", "inseam (left)"} <= set(i["garment"]["seams"])
+    assert i["garment"]["unsure"] == [] and i["assembly"] == "inferred"
+    assert i["fabric"]["name"] == "stretch_knit" and "foot" in i["fabric"]["why"]
+    assert idle.get(f"/api/garments/{g['id']}", headers=h).json()["info"] == i
+    svg = idle.get(g["links"]["pattern_svg"])  # the link opens it without the token (an <img src>)
+    assert svg.status_code == 200 and svg.headers["content-type"].startswith("image/svg+xml")
+    assert "default-src 'none'" in svg.headers["content-security-policy"]
+    root = svg.text
+    assert "size 36 of 26, 28" in root and "front rise" in root and "Leggings.DXF" in root
+    big = idle.get(g["links"]["pattern_svg"] + "&size=52")
+    assert big.status_code == 200 and "size 52 of" in big.text
+    r = idle.get(g["links"]["pattern_svg"] + "&size=99")
+    assert r.status_code == 404 and "26, 28, 30" in r.json()["error"]
+    assert idle.get(f"/api/garments/{g['id']}/pattern.svg").status_code == 401  # no key, no token
+    assert idle.get(g["links"]["pattern_svg"].replace(g["id"], "0" * 16)).status_code == 401  # another's key
+    other = token(idle)
+    assert idle.get(f"/api/garments/{g['id']}/pattern.svg", headers=other).status_code == 404
+    asm = idle.get(g["links"]["assembly"], headers=h).json()  # the inferred assembly, to correct
+    assert set(asm["panels"]) == {"leg_l", "leg_r", "waistband"} and asm["tryon"]["fabric"] == "stretch_knit"
+
+    bid = idle.post("/api/bodies/default", json={"preset": "female"}, headers=h).json()["id"]
+    for size, want in (("40", "40"), ("auto", "auto"), ("AUTO", "auto"), (None, None)):
+        r = idle.post("/api/tryons", json={"body_id": bid, "garment": g["id"], "size": size}, headers=h)
+        assert r.status_code == 202 and r.json()["request"]["size"] == want, r.text
+        idle.delete(f"/api/tryons/{r.json()['id']}", headers=h)
+    r = idle.post("/api/tryons", json={"body_id": bid, "garment": g["id"], "size": "M"}, headers=h)
+    assert r.status_code == 422 and "sizes are 26, 28" in r.json()["error"]
+    r = idle.post("/api/tryons", json={"body_id": bid, "garment": g["id"], "assembly": "/etc/passwd"}, headers=h)
+    assert r.status_code == 422 and "upload them with it" in r.json()["error"]
 
 
 def test_upload_says_what_the_loader_and_the_measurements_found(idle, tmp_path):
@@ -226,6 +278,28 @@ def test_tryon_runs_to_the_end(tmp_path):
         assert set(spec["pattern"]["panels"]) == {"front", "back"} and len(spec["pattern"]["stitches"]) == 4
         assert c.get(j["files"]["pattern.svg"], headers=h).text.startswith("<svg")
         assert c.get(f"/api/tryons/{j['id']}/files/..%2Fjobs.sqlite", headers=h).status_code == 404
+
+
+def test_a_dxf_alone_is_tried_on_in_another_of_its_sizes(tmp_path):
+    """A DXF uploaded alone, a try-on in one of its sizes that is not its default: a real worker
+    dresses that size, in the fabric the pattern suggests."""
+    from tests.samples import DXF_SAMPLES
+
+    with TestClient(create_app(_settings(tmp_path))) as c:
+        h = token(c)
+        g = c.post("/api/garments", files={"file": ("Leggings.DXF", (DXF_SAMPLES / "ORILEGWB_AAMA.DXF").read_bytes())},
+                   headers=h).json()
+        r = c.post("/api/tryons", json={"body": "default:female", "garment": g["id"], "size": "40",
+                                        "resolution_cm": 2}, headers=h)
+        assert r.status_code == 202, r.text
+        j = wait(c, h, r.json()["id"])
+        assert j["status"] == "done", j
+        rep = j["report"]
+        assert rep["garment"] == "Leggings (size 40)" and rep["fabric"] == "stretch_knit", rep["garment"]
+        assert rep["settled"] and rep["penetration_mm"]["max"] <= 2.0
+        assert rep["strain"]["max"] <= rep["strain"]["threshold"] + 0.01
+        spec = c.get(j["files"]["pattern.json"], headers=h).json()  # the leggings as dressed
+        assert list(spec["pattern"]["panels"]) == ["leg_l", "leg_r", "waistband"]
 
 
 def test_animated_body_upload_moves_as_uploaded(tmp_path):
@@ -334,7 +408,7 @@ def test_viewer_relay_live_and_recording(tmp_path):
         c.cookies.clear()
         other_job = c.post("/api/tryons", json={"body": "default:female", "garment": "skirt"},
                            headers={"Authorization": f"Bearer {other}"}).json()
-        other_key = other_job["viewer"] or c.app.state.keys.job_key(other_job["id"])
+        other_key = other_job["viewer"] or c.app.state.keys.link_key(other_job["id"])
         assert c.get(f"/viewer/{jid}/?key={other_key}").status_code == 401  # one job's key opens only it
         assert c.get(f"/viewer/{jid}/?token={tok}").status_code == 401  # never the API token in a URL
         proto = f"viser-v{viser.__version__}"
@@ -366,7 +440,7 @@ def test_settings_tokens_and_listing(tmp_path):
         r = c.post("/api/tryons", json={"body_id": b["id"], "garment": g["id"], "size": "M"}, headers=h)
         assert r.status_code == 422 and "own size" in r.json()["error"]
         assert [x["id"] for x in c.get("/api/tryons", headers=h).json()] == [j.json()["id"]]
-        key = c.app.state.keys.job_key(j.json()["id"])
+        key = c.app.state.keys.link_key(j.json()["id"])
         assert c.get(f"/viewer/{j.json()['id']}/?key={key}").status_code == 409  # queued: nothing yet
         assert c.delete(f"/api/garments/{g['id']}", headers=h).status_code == 204
         assert c.get(f"/api/garments/{g['id']}", headers=h).status_code == 404

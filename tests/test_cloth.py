@@ -532,6 +532,10 @@ def test_fabrics_are_physical():
         assert 0 < f.friction < 1 and 0 < f.strain_threshold < 0.5
     assert FABRICS["denim"].density > FABRICS["cotton"].density > FABRICS["silk"].density
     assert FABRICS["jersey"].strain_threshold > FABRICS["cotton"].strain_threshold
+    # an elastane knit: easier to stretch than jersey, worn further stretched, heavier
+    knit = FABRICS["stretch_knit"]
+    assert knit.stretch < FABRICS["jersey"].stretch and knit.strain_threshold > FABRICS["jersey"].strain_threshold
+    assert knit.density > FABRICS["jersey"].density
 
 
 def test_stale_contacts_carry_the_last_answer_forward():

@@ -343,6 +343,14 @@ def test_the_whole_garments_are_inferred(name, panels):
     assert max(abs(a / f - 1) for a, f in imp.areas.values()) < 0.005
     if "leg_l" in panels:
         assert {"front rise", "back rise", "inseam (left)", "inseam (right)"} <= set(imp.labels)
+        # leggings: a stretch knit, said by a piece's category ('TIGHT LEG ...') or by legs' openings
+        # narrower than a foot (ORILEGWB's pieces name no fabric); the spec and the assembly carry it
+        fabric, why = imp.fabric
+        assert fabric == "stretch_knit" and imp.spec.tryon.fabric == fabric and imp.assembly["tryon"]["fabric"] == fabric
+        assert ("'TIGHT LEG" in why) if name.startswith("GLX") else ("narrower than a foot" in why)
+        assert any(n.startswith("fabric: stretch_knit") for n in imp.notes)
+    else:
+        assert imp.fabric is None and imp.spec.tryon.fabric is None  # woven tops: the user's fabric or cotton
     if name == "drill-holes.DXF":  # a polo: its placket and interlinings said to be left out
         assert sum("placket" in x or "interlining" in x for x in imp.left_out) == 4
 
@@ -440,12 +448,14 @@ def test_size_auto_takes_the_smallest_size_with_room_for_the_body():
 @pytest.mark.parametrize("name, body, fabric", [
     ("MEN_CLASSIC_TEE.DXF", "default:male", "cotton"),
     ("GMH1006F18_AAMA.DXF", "default:male", "cotton"),
-    ("ORILEGWB_AAMA.DXF", "default:female,height=1.52,weight=0.05", "jersey"),
+    ("ORILEGWB_AAMA.DXF", "default:female", None),
+    ("GLX4802S19_AAMA.DXF", "default:female", None),
 ])
 def test_a_dxf_alone_drapes_in_its_middle_size(name, body, fabric):
     """Seams inferred, nothing else given: settled, seams closed, no penetration beyond the
-    usual bars; a top's sleeves go round the arms and its collar round the neck, leggings'
-    legs round the legs."""
+    usual bars, strain within the fabric's threshold + 1 %; a top's sleeves go round the arms and
+    its collar round the neck, leggings' legs round the legs (in the stretch knit they suggest:
+    cut 16-18 % under default:female's hips, they are worn stretched)."""
     from engine.body import resolve_body
     from engine.body.measure import measure
     from engine.scene.request import TryOnRequest
@@ -459,10 +469,12 @@ def test_a_dxf_alone_drapes_in_its_middle_size(name, body, fabric):
     assert rep["settled"]
     gap = rep["seam_gap_mm"]  # closed: welded within 1 cm, or a few pairs by the stall rule within 2 cm
     assert gap["max"] < 10 or (gap["snapped"] <= 4 and gap["max"] <= 20), gap
-    assert rep["penetration_mm"]["max"] <= 3.0 and rep["penetration_mm"]["p99"] <= 1.0
-    assert rep["strain"]["max"] <= rep["strain"]["threshold"] + 0.10  # (not refused; leggings: tight)
+    assert rep["penetration_mm"]["max"] <= 2.0 and rep["penetration_mm"]["p99"] <= 0.5
+    assert rep["strain"]["max"] <= rep["strain"]["threshold"] + 0.01 and not rep["tight"]
     x, m = res.positions, measure(b)
     if "leg_l" in spec.pattern.panels:  # cloth round both legs at the knee, none above the waist
+        assert rep["fabric"] == "stretch_knit" and rep["fabric_why"].startswith("the pattern's")
+        assert rep["shift_mm"]["top"] > -60  # it stays up (friction holds it while it is sewn)
         knee = np.abs(x[:, 1] - m.knee_height) < 0.03
         assert (x[knee, 0] > 0.03).sum() > 20 and (x[knee, 0] < -0.03).sum() > 20
         assert x[:, 1].max() < m.waist_height + 0.05
@@ -492,3 +504,60 @@ def test_a_sew_line_is_what_is_simulated(tmp_path):
     (a, f), = piece_areas(p).values()
     assert f == pytest.approx(28 * 18) and abs(a / f - 1) < 1e-6
     assert summary(p)["pieces"][0]["sizes"]["one size"]["sew_line_area_cm2"] == pytest.approx(504.0)
+
+
+def test_the_fabric_is_the_users_else_the_patterns_else_cotton():
+    """A try-on's fabric: the one asked for; else the pattern's own (a DXF of leggings suggests the
+    stretch knit, and says why); else cotton. A fabric worn stretched is sewn with friction (it
+    would slide down the body to where it is least stretched); cotton is not."""
+    from engine.body import resolve_body
+    from engine.cloth.fabrics import get_fabric
+    from engine.scene.request import TryOnOptions
+    from engine.scene.tryon import sewing_friction, with_fabric
+
+    p = sample("ORILEGWB_AAMA.DXF")
+    legs = import_pattern(DXF_SAMPLES / "ORILEGWB_AAMA.DXF", pattern=p).spec
+    req, why = with_fabric(TryOnOptions(), legs)
+    assert req.fabric == "stretch_knit" and why.startswith("the pattern's: its legs' openings")
+    req, why = with_fabric(TryOnOptions(fabric="denim"), legs)
+    assert req.fabric == "denim" and why == "asked for"
+    req, why = with_fabric(TryOnOptions(), load_pattern(SAMPLE_SKIRT))
+    assert req.fabric == "cotton" and why == "the default"
+    body = resolve_body("default:female")
+    scale, why = sewing_friction(body, get_fabric("stretch_knit"))
+    assert scale == 1.0 and "worn stretched" in why
+    assert sewing_friction(body, get_fabric("cotton")) == (0.0, None)
+
+
+def test_drape_takes_a_dxf_assembly_and_units_and_refuses_them_for_other_patterns(tmp_path):
+    """--assembly and --units go with a DXF (the assembly then says how it is sewn, in any of its
+    sizes); for a GarmentCode pattern or a catalogue garment they are refused before anything runs."""
+    from engine.scene.garments import resolve_garment
+
+    spec = load_pattern(SAMPLE_SKIRT)
+    write_dxf(spec, tmp_path / "skirt.dxf")
+    (tmp_path / "a.json").write_text(json.dumps(assembly_of(spec)))
+    got, place, name = resolve_garment(str(tmp_path / "skirt.dxf"), None, None, units="mm",
+                                       assembly=str(tmp_path / "a.json"))
+    assert list(got.pattern.panels) == list(spec.pattern.panels) and place is None
+    assert len(got.pattern.stitches) == len(spec.pattern.stitches) and name == "skirt.dxf (size one size)"
+    for garment in (str(SAMPLE_SKIRT), "skirt"):
+        r = CliRunner().invoke(app, ["drape", "--body", "default:female", "--garment", garment, "--assembly",
+                                     str(tmp_path / "a.json"), "--out", str(tmp_path / "out")])
+        assert r.exit_code == 2 and "go with a DXF pattern" in r.output, r.output
+
+
+def test_an_assembly_past_a_garments_size_is_refused_at_once(tmp_path):
+    """An assembly with thousands of panels (copies of a piece) or stitches is no garment: refused
+    when read, before anything is built (building and checking them takes seconds)."""
+    from engine.pattern.dxf import MAX_PANELS, MAX_STITCHES
+
+    spec = load_pattern(SAMPLE_SKIRT)
+    asm = assembly_of(spec)
+    first = next(iter(asm["panels"]))
+    many = dict(asm, panels={**asm["panels"], **{f"copy{k}": {"copy_of": first} for k in range(MAX_PANELS)}})
+    with pytest.raises(InputError, match="panels: Dictionary should have at most 200"):
+        parse_assembly(many, "a.json")
+    with pytest.raises(InputError, match="stitches: List should have at most"):
+        parse_assembly(dict(asm, stitches=asm["stitches"] * (MAX_STITCHES // len(asm["stitches"]) + 1)), "a.json")
+    assert parse_assembly(asm, "a.json").panels.keys() == asm["panels"].keys()

@@ -1,7 +1,5 @@
-"""The bounded fuzzing run of the default tests: every parser but the DXF pair gets malformed inputs
-for four seconds each (about a minute in all); `make fuzz` runs 10,000 per parser. The DXF reader
-and its assembly loader (engine/pattern/dxf.py) are being rewritten (issue 49): their targets run in
-`make fuzz` and join this list once the new reader is in."""
+"""The bounded fuzzing run of the default tests: every parser gets malformed inputs for four
+seconds each (about a minute in all); `make fuzz` runs 10,000 per parser."""
 
 from __future__ import annotations
 
@@ -14,7 +12,7 @@ import pytest
 from tests.fuzz.run import main
 from tests.fuzz.targets import TARGETS
 
-BOUNDED = [t for t in TARGETS if t not in ("dxf", "assembly")]
+BOUNDED = list(TARGETS)
 
 
 def test_bounded_fuzz_run(tmp_path):
@@ -38,8 +36,6 @@ def test_inputs_the_fuzzer_found(path):
     from tests.fuzz.run import HANG_SECONDS, _classify
 
     target = path.name.split("-")[0]
-    if target not in BOUNDED:
-        pytest.skip("the DXF reader's own exception types: for the new reader of issue 49")
     t0 = time.perf_counter()
     outcome, detail = _classify(TARGETS[target], path.read_bytes())
     assert outcome in ("refused", "accepted"), (outcome, detail)

@@ -199,8 +199,8 @@ def test_page_dresses_a_scan_with_the_arms_close_with_the_arms_raised(server, tm
 
 
 def test_page_dresses_a_dxf_pattern_with_its_assembly(server, tmp_path):
-    """A shop's DXF pieces: choosing one asks for its assembly (the page says so if it is missing),
-    then the pattern is dressed like any other."""
+    """A DXF whose pieces make no garment the inference knows: choosing it says so at once and
+    asks for its assembly; with the assembly it is dressed like any other pattern."""
     import json
 
     from engine.pattern.dxf import assembly_of, write_dxf
@@ -214,14 +214,49 @@ def test_page_dresses_a_dxf_pattern_with_its_assembly(server, tmp_path):
         assert page.is_hidden("#dxfparts")
         page.set_input_files("#pattern", str(tmp_path / "skirt.dxf"))
         assert page.is_visible("#assembly")
-        page.select_option("#quality", "3")
-        page.click("#tryon")
         page.wait_for_function("document.getElementById('status').textContent.includes('assembly')")
         page.set_input_files("#assembly", str(tmp_path / "skirt-assembly.json"))
+        page.wait_for_selector("#dxfsvg[src]")  # read with its assembly: its pieces, edges numbered
+        assert "from your assembly" in page.inner_text("#dxfinfo")
+        page.select_option("#quality", "3")
         page.screenshot(path=str(SHOTS / "7-dxf-form.png"))
         _try_on(page)
         assert "skirt" in page.inner_text("#status")
         page.frame_locator("#viewer").locator("canvas").first.wait_for(timeout=60_000)
         time.sleep(6)  # the recording plays to the draped skirt
         page.screenshot(path=str(SHOTS / "8-dxf-done.png"))
+    assert errors == [], errors
+
+
+def test_page_dresses_a_dxf_alone_in_a_size_chosen_from_its_own(server, tmp_path):
+    """A shop's DXF alone (leggings, 14 graded sizes): choosing it shows its pieces with the
+    inferred seams numbered and coloured and fills the size chooser with the file's sizes (its
+    sample size chosen); another size redraws the picture; Try on dresses that size, in the
+    stretch knit the pattern suggests."""
+    import shutil as sh
+
+    from tests.samples import DXF_SAMPLES
+
+    dxf = tmp_path / "Leggings.DXF"
+    sh.copy(DXF_SAMPLES / "ORILEGWB_AAMA.DXF", dxf)
+    with _page(server) as (page, errors):
+        page.set_input_files("#pattern", str(dxf))
+        page.wait_for_function("document.getElementById('dxfsvg').naturalWidth > 0", timeout=60_000)
+        sizes = page.eval_on_selector_all("#size option", "os => os.map(o => o.value)")
+        assert sizes == ["26", "28", "30", "32", "34", "36", "38", "40", "42", "44", "46", "48", "50", "52", "auto"]
+        assert page.input_value("#size") == "36"
+        info = page.inner_text("#dxfinfo")
+        assert "Leggings.DXF: bottom, 2 pieces in 14 sizes" in info and "front rise" in info, info
+        assert "stretch_knit" in info and "stretch_knit" in page.eval_on_selector("#fabric", "s => s.options[0].text")
+        page.select_option("#size", "40")
+        page.wait_for_function("document.getElementById('dxfsvg').src.endsWith('size=40') && "
+                               "document.getElementById('dxfsvg').complete && "
+                               "document.getElementById('dxfsvg').naturalWidth > 0", timeout=60_000)
+        page.screenshot(path=str(SHOTS / "9-dxf-alone-form.png"))
+        _try_on(page)
+        text = page.inner_text("#status")
+        assert "Done: Leggings (size 40) in stretch_knit" in text, text
+        page.frame_locator("#viewer").locator("canvas").first.wait_for(timeout=60_000)
+        time.sleep(6)  # the recording plays to the draped leggings
+        page.screenshot(path=str(SHOTS / "10-dxf-alone-done.png"))
     assert errors == [], errors

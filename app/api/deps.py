@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated, Callable
 
-from fastapi import Depends, Header, HTTPException, Path
+from fastapi import Depends, Header, HTTPException, Path, Query
 from starlette.requests import HTTPConnection
 
 from app import crud
@@ -59,6 +59,18 @@ def upload_context(settings: SettingsDep, db: DBDep, who: Owner, conn: HTTPConne
 
 UploadDep = Annotated[Upload, Depends(upload_context)]
 
+
+def garment_opened(settings: SettingsDep, db: DBDep, keys: KeysDep, conn: HTTPConnection,
+                   gid: str = Path(), key: str | None = Query(None),
+                   authorization: str | None = Header(None)) -> tuple[dict, Upload]:
+    """A garment opened by its signed link or its owner's token, and the reading context of its
+    owner (a picture drawn on demand is read in the fence, counted against the owner's uploads)."""
+    row = job_opened(db, keys, gid, key, authorization, table="garments")
+    return row, Upload(settings, db, row["owner"], conn.app.state.gate)
+
+
+OpenedGarment = Annotated[tuple[dict, Upload], Depends(garment_opened)]
+
 NAMES = {"bodies": "body", "garments": "garment", "jobs": "job"}
 
 
@@ -86,20 +98,34 @@ def job_view(s: SettingsDep, keys: KeysDep):
     """row -> the try-on's JSON, its links signed with a fresh job key."""
     from app.models import job_public
 
-    return lambda row: job_public(row, s.data_dir, keys.job_key(row["id"]))
+    return lambda row: job_public(row, s.data_dir, keys.link_key(row["id"]))
 
 
 JobView = Annotated[Callable[[dict], dict], Depends(job_view)]
 
 
-def job_opened(db: DBDep, keys: KeysDep, jid: str, key: str | None, authorization: str | None) -> dict:
-    """A job opened by its signed key (links, the viewer) or by its owner's token; else 401/404."""
-    if keys.opens(key, jid):
-        row = crud.get(db, "jobs", jid)
+def job_opened(db: DBDep, keys: KeysDep, jid: str, key: str | None, authorization: str | None,
+               table: str = "jobs") -> dict:
+    """A job (or a garment: table "garments") opened by its signed key (links, the viewer) or by
+    its owner's token; else 401/404."""
+    kind = NAMES[table]
+    if keys.opens(key, jid, kind):
+        row = crud.get(db, table, jid)
     elif authorization:
-        return owned(db, "jobs", jid, current_owner(keys, db, authorization))
+        return owned(db, table, jid, current_owner(keys, db, authorization))
     else:
-        raise HTTPException(401, "this link has expired or is not valid: open the try-on again for a fresh one")
+        what = "try-on" if kind == "job" else kind
+        raise HTTPException(401, f"this link has expired or is not valid: open the {what} again for a fresh one")
     if row is None:
-        raise HTTPException(404, f"no try-on '{jid}'")
+        raise HTTPException(404, f"no {'try-on' if kind == 'job' else kind} '{jid}'")
     return row
+
+
+def garment_view(s: SettingsDep, keys: KeysDep):
+    """row -> the garment's JSON, its picture links signed with a fresh garment key."""
+    from app.models import garment_public
+
+    return lambda row: garment_public(row, keys.link_key(row["id"], "garment"))
+
+
+GarmentView = Annotated[Callable[[dict], dict], Depends(garment_view)]

@@ -3,8 +3,9 @@
 - An API token is stored only as HMAC-SHA256(server key, token): the tokens table and every
   row's owner column hold that hash, so a copy of the database gives no usable token. Fixed
   tokens (TRYON_TOKENS) are compared in constant time.
-- A job's results and viewer are opened with a job key, `<expiry>.<signature>`, valid for
-  TRYON_LINK_SECONDS: links the page can put in <img src> and an iframe, never the API token.
+- A job's results and viewer, and an uploaded garment's pictures, are opened with a link key,
+  `<expiry>.<signature>` of "job:<id>" or "garment:<id>", valid for TRYON_LINK_SECONDS: links the
+  page can put in <img src> and an iframe, never the API token.
 - The server key is TRYON_SECRET, else a random key kept in DATA/secret.key (0600) so that
   tokens outlive a restart.
 """
@@ -44,19 +45,20 @@ class Keys:
         t = token.encode()
         return any([hmac.compare_digest(t, f) for f in self.fixed])  # every one compared: no early exit
 
-    def _sign(self, jid: str, expiry: int) -> str:
-        return hmac.new(self.key, f"job:{jid}:{expiry}".encode(), hashlib.sha256).hexdigest()[:32]
+    def _sign(self, subject: str, expiry: int) -> str:
+        return hmac.new(self.key, f"{subject}:{expiry}".encode(), hashlib.sha256).hexdigest()[:32]
 
-    def job_key(self, jid: str) -> str:
-        """A key that opens job `jid`'s results and viewer until it expires."""
+    def link_key(self, rid: str, kind: str = "job") -> str:
+        """A key that opens job `rid`'s results and viewer (kind "garment": an uploaded garment's
+        pictures) until it expires."""
         expiry = int(time.time() + self.link_seconds)
-        return f"{expiry}.{self._sign(jid, expiry)}"
+        return f"{expiry}.{self._sign(f'{kind}:{rid}', expiry)}"
 
-    def opens(self, key: str | None, jid: str) -> bool:
+    def opens(self, key: str | None, rid: str, kind: str = "job") -> bool:
         expiry, _, sig = (key or "").partition(".")
         if not expiry.isdigit() or int(expiry) < time.time():
             return False
-        return hmac.compare_digest(sig, self._sign(jid, int(expiry)))
+        return hmac.compare_digest(sig, self._sign(f"{kind}:{rid}", int(expiry)))
 
 
 class RateLimit:

@@ -3,8 +3,9 @@ their results and status. Started with multiprocessing's spawn (never fork after
 
 A try-on's request (JSON, resolved by the API): body {"spec": "default:female,..."},
 {"file": path} or {"animation": path, "fps": rate} (dressed on its first frame; with motion
-"walk" it moves as uploaded); garment {"name": catalogue name} or {"file": pattern path}; size, fabric,
-motion ("none" or "walk"), seconds, resolution_cm. Results go to DATA/jobs/<id>/attempt-<n>/
+"walk" it moves as uploaded); garment {"name": catalogue name} or {"file": pattern path, "label":
+its name, "dxf": {"units", "assembly"} for a DXF}; size, fabric, motion ("none" or "walk"),
+seconds, resolution_cm. Results go to DATA/jobs/<id>/attempt-<n>/
 (app/queue/results.py). The worker gets the service's settings from its supervisor and hands them
 to the engine; it holds a job by a lease that its heartbeats extend, and dies with its supervisor.
 """
@@ -238,11 +239,12 @@ def _simulate(req, body, g, walking, out, progress, view, track=None) -> dict:
     options = {k: req[k] for k in TryOnOptions.model_fields if k in req}  # (as posted: app/services/tryons.py)
     if track is not None:
         options["fps"] = track.fps  # an uploaded animation plays at its own rate
-    request = TryOnRequest(garment=g["name"] if catalogue else g["file"],
-                           size=(req.get("size") or "M") if catalogue else None, **options)
+    # a catalogue garment in a chart size (M by default); a DXF in one of its sizes (its units and
+    # assembly as uploaded); a GarmentCode pattern in its own
+    size = (req.get("size") or "M") if catalogue else req.get("size")
+    request = TryOnRequest(garment=g["name"] if catalogue else g["file"], size=size, **g.get("dxf", {}), **options)
     res, report = dress_request(body, request, progress=lambda stage, f, msg: progress(stage, f, retry[0] + msg),
-                                observer=view, note=note if catalogue else None,
-                                label=None if catalogue else g.get("label"))
+                                observer=view, note=note, label=None if catalogue else g.get("label"))
     out.mkdir(parents=True, exist_ok=True)
     write_outputs(out, body, res, report, size=500)
     if walking:

@@ -3,6 +3,7 @@ the result small and picklable. Raises the engine's TryonError for a file that c
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 
@@ -48,22 +49,87 @@ def read_pattern(path: Path, source: str) -> dict:
     return _info(spec, check(spec, source=source))
 
 
-def read_dxf(dxf: Path, asm: Path, units: str | None, dest: Path, names: tuple[str, str]) -> dict:
-    """A DXF and its assembly converted to GarmentCode JSON at `dest` and checked; its info.
-    names: the client's names of the two files (errors name those, not ours)."""
-    from engine.errors import TryonError
-    from engine.pattern.dxf import import_dxf, load_assembly
-    from engine.pattern.io import save_pattern
+def read_dxf(dxf: Path, asm: Path | None, units: str | None, folder: Path, names: tuple[str, str]) -> dict:
+    """A DXF cutting pattern (and its assembly, if given) read, its garment inferred (or
+    assembled) and checked in its default size; its seam picture (`svg_name`) and the assembly
+    used written to `folder`; its info: units, sizes (the file's order), pieces, the garment and
+    what the inference is unsure of. names: the client's names of the two files (errors name
+    those, not ours)."""
+    from engine.pattern.dxf import load_assembly, summary
+    from engine.pattern.dxf_read import read_pattern
+
+    with _client_names(names, dxf, asm):
+        pattern = read_pattern(dxf, units)
+        pattern.source = names[0]
+        assembly = load_assembly(asm) if asm is not None else None
+        imp, problems = _import(pattern, dxf, None, assembly, names[0])
+    (folder / svg_name(pattern.sizes, imp.size)).write_text(imp.svg())
+    if imp.assembly is not None:
+        (folder / INFERRED).write_text(json.dumps(imp.assembly, indent=1))
+    s = summary(pattern, imp)
+    pieces = [{k: p[k] for k in ("name", "quantity", "cut", "category", "annotation")} for p in s["pieces"]]
+    g = s["garment"]
+    return {**_info(imp.spec, problems), "from": "dxf", "file": names[0], "units": s["units"], "units_note": s["units_note"],
+            "units_given": units, "sizes": s["sizes"], "size": imp.size, "pieces": pieces,
+            "garment": {k: g[k] for k in ("kind", "panels", "seams", "unsure", "left_out")},
+            "notes": s["notes"] + g["notes"], "fabric": g["fabric"],
+            "assembly": "yours" if assembly is not None else "inferred"}
+
+
+def dxf_svg(dxf: Path, asm: Path | None, units: str | None, size: str, dest: Path, source: str) -> None:
+    """pattern.svg of a stored DXF pattern (read at its upload) in another of its sizes, written to
+    `dest`; source: the client's name of the file."""
+    from engine.pattern.dxf import load_assembly
+    from engine.pattern.dxf_read import read_pattern
+
+    pattern = read_pattern(dxf, units)
+    pattern.source = source
+    imp, _ = _import(pattern, dxf, size, load_assembly(asm) if asm is not None else None, source)
+    tmp = dest.with_suffix(".part")
+    tmp.write_text(imp.svg())
+    tmp.replace(dest)  # (two requests for one picture: each writes its own, the last one stays)
+
+
+INFERRED = "inferred-assembly.json"
+
+
+def svg_name(sizes: list[str], size: str) -> str:
+    """The stored picture of a size (by its place in the file's sizes: a size name may hold any
+    character)."""
+    return f"pattern-{sizes.index(size)}.svg"
+
+
+def _import(pattern, dxf: Path, size: str | None, assembly, source: str):
+    """(Imported, its problems) of the pattern in `size`; InputError when no garment can be made."""
+    from engine.errors import InputError
+    from engine.pattern.dxf import import_pattern
     from engine.pattern.validate import check
 
-    try:
-        spec, notes = import_dxf(dxf, load_assembly(asm), units)
-    except TryonError as e:
-        msg = str(e).replace(dxf.name, names[0]).replace(asm.name, names[1])
+    imp = import_pattern(dxf, size, assembly=assembly, pattern=pattern)
+    if imp.kind == "pieces" and assembly is None:
+        raise InputError(f"{source}: {'; '.join(imp.unsure)} (upload its assembly file with it: field 'assembly'; "
+                         "`tryon pattern import` draws the pieces with every corner and edge numbered)")
+    return imp, check(imp.spec, source=source)
+
+
+class _client_names:
+    """Errors inside name the client's files (and their 'units' field), not our stored names."""
+
+    def __init__(self, names: tuple[str, str], dxf: Path, asm: Path | None):
+        self.pairs = [(dxf.name, names[0])] + ([(asm.name, names[1])] if asm is not None else [])
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, e, tb):
+        from engine.errors import TryonError
+
+        if not isinstance(e, TryonError):
+            return False
+        msg = str(e)
+        for ours, theirs in self.pairs:
+            msg = msg.replace(ours, theirs)
         raise type(e)(msg.replace("--units", "the 'units' field")) from None
-    problems = check(spec, source=names[0])
-    save_pattern(spec, dest)
-    return {**_info(spec, problems), "notes": notes, "from": "dxf"}
 
 
 def _info(spec, problems) -> dict:

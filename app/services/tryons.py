@@ -14,6 +14,7 @@ from app.core.config import Settings
 from app.core.db import DB
 from app.models import TryOnIn
 from app.queue.results import job_dir
+from app.services import garments
 
 
 def _body(req: TryOnIn, db: DB, who: str) -> dict:
@@ -45,34 +46,45 @@ def _check_default(spec: str) -> None:
         raise HTTPException(422, f"body: {e}") from None
 
 
-def _garment(req: TryOnIn, db: DB, who: str) -> dict:
+def _garment(req: TryOnIn, db: DB, who: str) -> tuple[dict, str | None]:
+    """The worker's garment and size for `req`: a catalogue garment in a chart size or auto; an
+    uploaded DXF in one of its own sizes or auto; a GarmentCode pattern in its one size."""
     from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES
 
+    if req.assembly is not None or req.units is not None:
+        raise HTTPException(422, "assembly and units go with the DXF they belong to: upload them with it "
+                                 "(POST /api/garments, fields 'assembly' and 'units')")
+    auto = req.size is not None and req.size.lower() == AUTO
     if req.garment in CATALOGUE:
-        if req.size is not None and req.size.upper() not in SIZES and req.size.lower() != AUTO:
+        if req.size is not None and req.size.upper() not in SIZES and not auto:
             raise HTTPException(422, f"size '{req.size}': choose one of {', '.join(SIZES)} or {AUTO}")
-        return {"name": req.garment}
+        return {"name": req.garment}, None if req.size is None else (AUTO if auto else req.size.upper())
     g = crud.get_owned(db, "garments", req.garment, who)
     if g is None:
         raise HTTPException(404, f"garment '{req.garment}' is neither in the catalogue "
                                  f"({', '.join(CATALOGUE)}) nor one of your patterns")
+    out = {"file": g["file"], "label": g["name"]}
+    if garments.is_dxf(g):
+        sizes = json.loads(g["info"])["sizes"]
+        if req.size is not None and req.size not in sizes and not auto:
+            raise HTTPException(422, f"size '{req.size}': this pattern's sizes are {', '.join(sizes)} (or {AUTO})")
+        return {**out, "dxf": garments.dxf_request(g)}, AUTO if auto else req.size
     if req.size is not None:
-        raise HTTPException(422, "size applies to catalogue garments; a pattern has its own size")
-    return {"file": g["file"], "label": g["name"]}
+        raise HTTPException(422, "size applies to catalogue garments and DXF patterns; a GarmentCode pattern has "
+                                 "its own size")
+    return out, None
 
 
 def resolve(req: TryOnIn, db: DB, who: str) -> dict:
     """The worker's request for `req` (bodies and patterns by their stored files), or 4xx."""
-    from engine.pattern.catalogue import AUTO
     from engine.scene.request import TryOnOptions
 
-    body, garment = _body(req, db, who), _garment(req, db, who)
+    body, (garment, size) = _body(req, db, who), _garment(req, db, who)
     # the service's own bounds, inside the engine's (a shared server: no 0.2 cm cloth, no minute-long walks)
     if not (0.75 <= req.resolution_cm <= 4.0):
         raise HTTPException(422, "resolution_cm: use 0.75 .. 4 cm")
     if req.seconds > 20.0:
         raise HTTPException(422, "seconds: walk 0.1 .. 20 s")
-    size = None if req.size is None else (AUTO if req.size.lower() == AUTO else req.size.upper())
     return {"body": body, "garment": garment, "size": size, **req.model_dump(include=set(TryOnOptions.model_fields))}
 
 

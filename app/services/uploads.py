@@ -4,6 +4,7 @@ in the fence (app/services/fence.py); nothing is left of a refused or failed upl
 from __future__ import annotations
 
 import errno
+import shutil
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,12 +37,15 @@ class Upload:
 
 @contextmanager
 def kept_only_if_stored(*paths: Path):
-    """The files are removed if anything inside fails (a refusal, a full disk, a bug)."""
+    """The files (or folders) are removed if anything inside fails (a refusal, a full disk, a bug)."""
     try:
         yield
     except BaseException:
         for p in paths:
-            p.unlink(missing_ok=True)
+            if p.is_dir():
+                shutil.rmtree(p, ignore_errors=True)
+            else:
+                p.unlink(missing_ok=True)
         raise
 
 

@@ -18,6 +18,19 @@ Sources (typical values; real bolts vary by +-30 %):
   ~0.4-0.6 for denim and knits.
 - Strain thresholds for the velocity modification (seed 003 §4.3 uses 1-15 % by fabric type):
   about the strain a garment shows in wear — small for woven fabrics, larger for knits.
+- Elastane (spandex, Lycra) knits, `stretch_knit`: leggings, swimwear, activewear. Elastane raises
+  a single jersey's area density by 23-63 % over the same jersey without it (Akter et al.,
+  "Performance analysis of spandex incorporated single jersey fabrics for sportswear", Indian J.
+  Sci. Technol. 13(20), 2020): 180-250 g/m^2 in cotton/elastane, 200-300 g/m^2 in the nylon/
+  elastane of leggings. It takes less force to stretch it at every extension than a cotton knit
+  (Senthilkumar & Anbumani, "Dynamic elastic behavior of cotton and cotton/spandex knitted
+  fabrics", J. Engineered Fibers and Fabrics 6(3), 2011); a four-way stretch knit extends 75-100 %
+  before it locks (sewing suppliers' figures), so its EMT at 500 gf/cm is 60-100 %. Such garments
+  are cut with negative ease, smaller than the body, and worn stretched: a pattern maker drafts
+  them to use about half the fabric's stretch, and "power stretch" fabrics are those made to
+  be worn 30-50 % stretched (comfort stretch: under 30 %; K. L. Hatch, "Textile Science", 1993,
+  on stretch fabrics). Leggings cut 16-18 % under the hips stretch 19-22 % round them on average
+  and more where the body curves (seat, calf), so its threshold is 40 %.
 
 The simulation uses the measured stretch and shear stiffness times `ClothParams.stiffness_scale`
 (default 0.03): the velocity modification caps the strain at the threshold, which is the point of
@@ -59,12 +72,18 @@ FABRICS: dict[str, Fabric] = {
                friction=0.25, strain_threshold=0.05, note="17.5 momme silk charmeuse, 75 g/m^2"),
         Fabric("jersey", density=0.180, stretch=490 / 0.35, shear=0.3 * G_UNIT, bending=0.04 * GF_CM2_PER_CM,
                friction=0.50, strain_threshold=0.15, note="cotton single jersey knit, 180 g/m^2"),
+        Fabric("stretch_knit", density=0.230, stretch=490 / 0.80, shear=0.2 * G_UNIT, bending=0.03 * GF_CM2_PER_CM,
+               friction=0.50, strain_threshold=0.40, note="cotton or nylon/elastane jersey (leggings), 230 g/m^2"),
     )
 }
 
 
-def get_fabric(name: str) -> Fabric:
+DEFAULT_FABRIC = "cotton"  # where neither the user nor the pattern names one
+
+
+def get_fabric(name: str | None) -> Fabric:
+    """The fabric `name` (None: DEFAULT_FABRIC)."""
     try:
-        return FABRICS[name]
+        return FABRICS[name or DEFAULT_FABRIC]
     except KeyError:
         raise InputError(f"unknown fabric '{name}'; choose one of: {', '.join(FABRICS)}") from None

@@ -30,7 +30,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from engine.errors import InputError
+from engine.errors import InputError, parser
 from engine.pattern import geometry as geo
 from engine.pattern.dxf_build import build_spec, fit_tol, section_edges
 from engine.pattern.dxf_infer import BAND_ROLES, Inference, Part, Seam, Span, frame_part, hints_of, infer
@@ -144,13 +144,18 @@ class SeamAssembly(BaseModel):
     b: SpanAssembly
 
 
+# an assembly's size: a garment has a few dozen pieces and a few hundred stitches at most (the
+# samples: 17 pieces, 44 stitches, 18 seams); a file past these is no garment and takes seconds to check
+MAX_PANELS, MAX_SEAMS, MAX_STITCHES = 200, 1000, 5000
+
+
 class Assembly(BaseModel):
     """The assembly file: what a DXF does not hold."""
 
     model_config = ConfigDict(extra="forbid")
-    panels: dict[str, PanelAssembly] = Field(default_factory=dict)
-    seams: list[SeamAssembly] = Field(default_factory=list)  # the inferred kind
-    stitches: list[tuple[StitchSide, StitchSide]] = Field(default_factory=list)  # GarmentCode's kind
+    panels: dict[str, PanelAssembly] = Field(default_factory=dict, max_length=MAX_PANELS)
+    seams: list[SeamAssembly] = Field(default_factory=list, max_length=MAX_SEAMS)  # the inferred kind
+    stitches: list[tuple[StitchSide, StitchSide]] = Field(default_factory=list, max_length=MAX_STITCHES)  # GarmentCode's
     panel_order: list[str] | None = None  # the order the panels are meshed in (default: the DXF's, then copies)
     tryon: TryonExtension | None = None
     size: str | None = None  # the size it was inferred in (any size of the pattern takes it)
@@ -160,6 +165,7 @@ class Assembly(BaseModel):
         return any(p.role is not None for p in self.panels.values())
 
 
+@parser("an assembly file (JSON)")
 def load_assembly(path: str | Path) -> Assembly:
     path = Path(path)
     if not path.is_file():
@@ -171,6 +177,7 @@ def load_assembly(path: str | Path) -> Assembly:
     return parse_assembly(data, path.name)
 
 
+@parser("an assembly", name_of=lambda data, source="assembly": source)
 def parse_assembly(data, source: str = "assembly") -> Assembly:
     if isinstance(data, dict) and isinstance(data.get("stitches"), list):  # [panel, edge] pairs allowed
         data["stitches"] = [[{"panel": s[0], "edge": s[1]} if isinstance(s, list) and len(s) == 2 else s
@@ -179,8 +186,14 @@ def parse_assembly(data, source: str = "assembly") -> Assembly:
         return Assembly.model_validate(data)
     except ValidationError as e:
         errs = e.errors()
-        parts = [f"{'.'.join(str(x) for x in err['loc'])}: {err['msg']}" for err in errs[:3]]
+        parts = [f"{'.'.join(_printable(x) for x in err['loc'])}: {err['msg']}" for err in errs[:3]]
         raise InputError(f"{source}: invalid assembly: " + "; ".join(parts)) from None
+
+
+def _printable(key, most: int = 40) -> str:
+    """A key of the user's file as an error names it: one line, not too long."""
+    text = "".join(c if c.isprintable() else "?" for c in str(key))
+    return text if len(text) <= most else text[:most] + "..."
 
 
 # ------------------------------------------------------------------ import
@@ -199,6 +212,7 @@ class Imported:
     left_out: list[str] = field(default_factory=list)
     kind: str = "pieces"  # top, bottom, pieces (nothing sewn)
     assembly: dict | None = None  # the inferred assembly (None when one was given)
+    fabric: tuple[str, str] | None = None  # (fabric, why) where the pattern suggests one (engine.pattern.dxf_fabric)
     areas: dict[str, tuple[float, float]] = field(default_factory=dict)  # panel -> (its area, its piece's) cm^2
     parts: list[Part] = field(default_factory=list)
     seams: list[Seam] = field(default_factory=list)
@@ -224,7 +238,9 @@ def import_pattern(path: str | Path, size: str | None = None, units: str | None 
     size = pick_size(pattern, size if size is not None else (assembly.size if assembly is not None else None))
     if assembly is not None and not assembly.inferred_kind:
         spec, notes = _placed_import(pattern, size, assembly)
-        return Imported(pattern, size, spec, [""] * len(spec.pattern.stitches), notes)
+        out = Imported(pattern, size, spec, [""] * len(spec.pattern.stitches), notes)
+        _suggest_fabric(out, [])
+        return out
     if assembly is not None:
         parts = [_part_of(pattern, size, name, pa) for name, pa in assembly.panels.items()]
         seams = [_seam_of(parts, sa) for sa in assembly.seams]
@@ -243,7 +259,27 @@ def import_pattern(path: str | Path, size: str | None = None, units: str | None 
             out.parts, out.seams = inf.parts, inf.seams
         parts = inf.parts
     out.areas = _areas(out.spec, parts, pattern, size)
+    _suggest_fabric(out, parts)
     return out
+
+
+def _suggest_fabric(imp: Imported, parts: list[Part]) -> None:
+    """The fabric the pattern's pieces say it is made of, as the spec's own fabric, where the
+    assembly names none (engine.pattern.dxf_fabric); said in the notes."""
+    from engine.pattern.dxf_fabric import suggest_fabric
+    from engine.pattern.spec import TryonExtension
+
+    spec = imp.spec
+    if spec.tryon is not None and spec.tryon.fabric:
+        return
+    found = suggest_fabric(imp.pattern, parts)
+    if found is None:
+        return
+    imp.fabric = found
+    if imp.assembly is not None:  # (the inferred assembly a user corrects: the fabric is theirs to change)
+        imp.assembly["tryon"] = {"fabric": found[0]}
+    spec.tryon = (spec.tryon or TryonExtension()).model_copy(update={"fabric": found[0], "fabric_why": found[1]})
+    imp.notes.append(f"fabric: {found[0]}, because {found[1]} (a fabric you choose wins)")
 
 
 def import_dxf(path: str | Path, assembly: Assembly | None = None, units: str | None = None,
@@ -447,6 +483,8 @@ def summary(pattern: DxfPattern, imported: Imported | None = None) -> dict:
                           "panels": list(imported.spec.pattern.panels),
                           "seams": sorted(set(imported.labels) - {""}), "stitches": len(imported.spec.pattern.stitches),
                           "notes": imported.notes, "unsure": imported.unsure, "left_out": imported.left_out,
+                          "fabric": ({"name": imported.fabric[0], "why": imported.fabric[1]} if imported.fabric
+                                     else None),
                           "area_vs_cut_line_pct": {n: round(100 * (a / f - 1), 3) for n, (a, f) in
                                                    imported.areas.items()}}
     return out

@@ -20,8 +20,10 @@ Texts: "Piece Name:", "Size:", "Quantity:" (ASTM writes "Quantity: n,m"), "Categ
 decided from the size of its pieces, see `_metric_unit`) and "Style Name:".
 
 Damaged files (CLO writes group codes of the wrong type) are read with ezdxf's `recover`; what
-it repaired is noted. Limits, each refused with a message that says which: MAX_DXF_BYTES,
-MAX_ENTITIES in all, MAX_PIECE_VERTICES and MAX_PARTS per piece per size.
+it repaired is noted. A file that neither reads (whatever ezdxf or this reader raise on it),
+coordinates that are not numbers: refused in one line (InputError). Limits, each refused with a
+message that says which: MAX_DXF_BYTES, MAX_ENTITIES in all, MAX_PIECE_VERTICES and MAX_PARTS per
+piece per size.
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.errors import InputError
+from engine.errors import MALFORMED, InputError, TryonError, reading
 from engine.pattern import geometry as geo
 
 CHAIN_TOL_CM = 0.05  # cut-line parts whose ends are this close (0.5 mm) are joined
@@ -271,7 +273,7 @@ def _raw(entities, budget: list[int]) -> _Raw:
         t = e.dxftype()
         if t == "POINT":
             loc = e.dxf.location
-            r.points.setdefault(lay, []).append(np.array([loc.x, loc.y], dtype=np.float64))
+            r.points.setdefault(lay, []).append(_finite(np.array([loc.x, loc.y], dtype=np.float64), t, lay))
             continue
         text = _text_of(e)
         if text is not None:
@@ -279,8 +281,15 @@ def _raw(entities, budget: list[int]) -> _Raw:
             continue
         pts = _points(e)
         if pts is not None:
-            r.lines.setdefault(lay, []).append(pts)
+            r.lines.setdefault(lay, []).append(_finite(pts, t, lay))
     return r
+
+
+def _finite(pts: np.ndarray, kind: str, layer: str) -> np.ndarray:
+    if not np.isfinite(pts).all():
+        raise InputError(f"a {kind} on layer {layer} has a coordinate that is not a number (nan or inf): the file "
+                         "is damaged; export it again")
+    return pts
 
 
 def _shape(raw: _Raw, to_cm: float, label: str) -> Shape | None:
@@ -447,6 +456,35 @@ def read_pattern(path: str | Path, units: str | None = None) -> DxfPattern:
     path = Path(path)
     if units is not None and units not in UNITS_CM:
         raise InputError(f"units '{units}': use one of {', '.join(UNITS_CM)}")
+    with reading(path.name, "a DXF cutting pattern"):  # (the malformed-input errors of our code and ezdxf's)
+        try:
+            return _read(path, units)
+        except Exception as e:
+            if isinstance(e, (TryonError, *MALFORMED)) or not _from_ezdxf(e):
+                raise
+            raise InputError(f"{path.name} could not be read as a DXF cutting pattern ({_one_line(e)}): it is "
+                             "damaged; export it again from the pattern software") from None
+
+
+def _from_ezdxf(e: BaseException) -> bool:
+    """Whether ezdxf raised `e`: its own error types, or an error raised inside its code while it
+    read a damaged file (a StopIteration in its tag validator)."""
+    import traceback
+
+    import ezdxf
+
+    if isinstance(e, ezdxf.DXFError):
+        return True
+    tb = traceback.extract_tb(e.__traceback__)
+    return bool(tb) and "/ezdxf/" in tb[-1].filename.replace("\\", "/")
+
+
+def _one_line(e: BaseException) -> str:
+    msg = str(e).strip().splitlines()[0][:160] if str(e).strip() else ""
+    return f"{type(e).__name__}: {msg}" if msg else type(e).__name__
+
+
+def _read(path: Path, units: str | None) -> DxfPattern:
     doc, notes = _open(path)
     msp = doc.modelspace()
     budget = [MAX_ENTITIES]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from html import escape
 from pathlib import Path
 
 import numpy as np
@@ -114,6 +115,6 @@ def pattern_to_svg(spec: PatternSpec, margin_cm: float = 5.0, edge_numbers: bool
             mid = len(sx) // 2
             out.append(f'<text x="{sx[mid]:.2f}" y="{sy[mid]:.2f}" font-size="2.2" fill="{c}">s{k}</text>')
         cx, cy = tf(poly.mean(axis=0, keepdims=True))
-        out.append(f'<text x="{cx[0]:.2f}" y="{cy[0]:.2f}" font-size="2.5" text-anchor="middle">{name}</text>')
+        out.append(f'<text x="{cx[0]:.2f}" y="{cy[0]:.2f}" font-size="2.5" text-anchor="middle">{escape(name)}</text>')
     out.append("</svg>")
     return "\n".join(out)

@@ -160,6 +160,7 @@ class TryonExtension(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     fabric: str | None = None
+    fabric_why: str | None = None  # why the pattern has this fabric (a DXF's suggestion: engine.pattern.dxf_fabric)
     placement: dict[str, PanelHint] = Field(default_factory=dict)
     made_for_body: str | None = None  # a body name/file the spec's own placement fits
 

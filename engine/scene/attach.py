@@ -2,11 +2,12 @@
 while the panels are sewn -- the top of a lower garment ("lower_interface") and of a strapless
 top ("strapless_top") from sliding down the body, a collar's ends ("right_collar",
 "left_collar") from sliding off the neck -- each vertex on one side of a plane (a one-sided
-constraint), for its first frames, then lets go. Here the same (engine.cloth.welds.hold_on_planes):
-each labelled vertex kept from going below (or, a collar's, further out than) where the
-placement put it -- the pattern's own placement on the body it was made for, else the one
-carried onto this body by its landmarks (engine.garment.place) -- while the garment is sewn and
-until it has settled once; then the drape lets go and lets it settle free (engine.scene.drape)."""
+constraint) for its first 400 frames, about its whole simulation. Here the same
+(engine.cloth.welds.hold_on_planes): each labelled vertex kept from going below (or, a
+collar's, further out than) where the placement put it -- the pattern's own placement on the
+body it was made for, else the one carried onto this body by its landmarks
+(engine.garment.place) -- while the garment is sewn and draped: a skirt with no waistband is
+held at its waist as its tie or elastic would hold it."""
 
 from __future__ import annotations
 
@@ -43,7 +44,7 @@ def attachment(garment: Garment, body: Body) -> tuple[Attachment | None, str | N
 
     for label in ("lower_interface", "strapless_top"):
         v = garment.labelled.get(label)
-        if v is not None and len(v):
+        if v is not None and len(v) and _round_body(body, x[v]):
             hold(label, v, x[v] - [0.0, SLACK, 0.0], (0.0, 1.0, 0.0), "from sliding down")
     collar = [lb for lb in ("right_collar", "left_collar") if len(garment.labelled.get(lb, ()))]
     if collar:
@@ -64,7 +65,20 @@ def attachment(garment: Garment, body: Body) -> tuple[Attachment | None, str | N
     att = Attachment(vertices=np.concatenate(idx).astype(np.int64), points=np.concatenate(points),
                      normals=np.concatenate(normals).astype(np.float64), tau=np.concatenate(tau),
                      vmax=np.concatenate(vmax))
-    return att, f"kept {', '.join(said)} while sewn and until first settled, as GarmentCode's simulator holds them"
+    return att, f"kept {', '.join(said)} while sewn and draped, as GarmentCode's simulator holds them"
+
+
+def _round_body(body: Body, p: np.ndarray) -> bool:
+    """Whether the held edge's middle lies within the body's horizontal extent at its height: a
+    waist tie holds on a body, not on the air beside it (a pattern placed away from the body is
+    let fall, and said so, rather than hung where it was put)."""
+    y = float(p[:, 1].mean())
+    near = body.vertices[np.abs(body.vertices[:, 1] - y) < 0.05]
+    if not len(near):
+        return False
+    mid = p[:, [0, 2]].mean(axis=0)
+    lo, hi = near[:, [0, 2]].min(axis=0), near[:, [0, 2]].max(axis=0)
+    return bool(np.all(mid >= lo) and np.all(mid <= hi))
 
 
 def welded(att: Attachment | None, vertex_map: np.ndarray) -> Attachment | None:

@@ -170,7 +170,7 @@ def _sew(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSolv
     pairs = garment.seams.astype(np.int64)
     gaps = np.zeros(len(pairs))
     gap0 = float(seam_gaps(state.x, pairs, gaps).max())
-    far = float(np.median(gaps)) > t.far_gap
+    far = float(np.percentile(gaps, 90)) > t.far_gap  # (a dart's pairs start closed in any layout)
     pulls = [t.vmax] + ([t.far_retry_vmax] if far and 0.0 < t.far_retry_vmax != t.vmax else [])
     its, timing = 0, {"cloth": 0.0, "collision": 0.0}
     for attempt, vmax in enumerate(pulls):
@@ -238,8 +238,12 @@ def _pull(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSol
     stall = deque(maxlen=2 * max(1, int(round(window / (check_every * dt)))))
     snap_from = int((min(t.snap_after, 2 * window) if retry else t.snap_after) / dt)
     calm = int(round(t.calm_start / dt))
+    # a flat layout sews with gravity growing as its seams close (else it falls off the body
+    # before they close round it): the share of the 90th-percentile gap closed, squared
+    p90_0 = float(np.percentile(seam_gaps(state.x, pairs, out.gaps), 90)) if far else 0.0
+    closed = 0.0 if far else 1.0
     for it in range(int(np.ceil(t.budget / dt))):
-        control.gravity_scale = out.gravity = t.gravity * min(1.0, (it + 1) * dt / t.gravity_ramp)
+        control.gravity_scale = out.gravity = t.gravity * min(1.0, (it + 1) * dt / t.gravity_ramp) * closed ** 2
         control.damping_scale = max(damping, t.far_damping) if it < calm else damping
         solver.step(state, control)
         hold_welds(state.x, state.v, model.mass, pairs, welded)
@@ -248,6 +252,8 @@ def _pull(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSol
         if it % check_every:
             continue
         seam_gaps(state.x, pairs, out.gaps)
+        if far:
+            closed = max(closed, min(1.0, 1.0 - float(np.percentile(out.gaps, 90)) / max(p90_0, 1e-9)))
         new = ~welded & (out.gaps < weld_gap)
         if new.any():  # the largest gap a weld closed at once (the snap it makes)
             out.gap_max = max(out.gap_max, float(out.gaps[new].max()))
@@ -313,8 +319,7 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
     until the shape stops moving, or the budget ends; a garment left stretched past the fabric's
     threshold + too_tight is refused. Gravity grows from `gravity_from` x g over the rest of the
     ramp. `solver` (of this model and collider) carries its iteration count and timing on.
-    attachment: vertices kept in front of planes (engine.scene.attach) until the cloth first
-    settles; then it is let go and settles again. The result's seam fields are zero (no seams are open in a sewn model)."""
+    attachment: vertices kept in front of planes (engine.scene.attach). The result's seam fields are zero (no seams are open in a sewn model)."""
     t = tuning.drape
     tuning.validate()
     fabric = get_fabric(request.fabric)
@@ -382,14 +387,8 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
             guard_share = sum(guards) / window
             full = gravity_from + (it + 1 - window) * dt / ramp >= 1.0  # the last window at full g
             if max(older, drift) < t.settle_speed and it >= min_it and full:
-                if control.attachment is None:
-                    settled = True
-                    break
-                # settled while held: let go (as GarmentCode's simulator does after its first
-                # frames) and settle again free -- a garment too wide to stay up slides down now
-                control.attachment = None
-                snaps.clear()
-                snaps.append(state.x.copy())
+                settled = True
+                break
     strain = solver.max_strain(state)
     if strain > refuse:
         raise _too_small(state, model, strain, fabric, "after draping it is stretched")

@@ -23,15 +23,17 @@ def is_dxf(arg: str) -> bool:
     return Path(arg).suffix.lower() == ".dxf"
 
 
-def dxf_garment(path: Path, body: Body, size: str | None):
+def dxf_garment(path: Path, body: Body, size: str | None, units: str | None = None, assembly: str | None = None):
     """(spec, placement, display name) of a DXF cutting pattern in one of its sizes: its sample size
     (else its middle one) by default; `auto`: the smallest whose girth covers the body's with
-    ease (engine.pattern.dxf_size). Its seams and placement are inferred."""
-    from engine.pattern.dxf import import_pattern
+    ease (engine.pattern.dxf_size). Its seams and placement are inferred, or as the assembly file
+    at `assembly` says; units: the DXF's, where it does not say."""
+    from engine.pattern.dxf import import_pattern, load_assembly
     from engine.pattern.dxf_read import read_pattern
 
     path = Path(path)
-    pattern = read_pattern(path)
+    pattern = read_pattern(path, units)
+    asm = load_assembly(assembly) if assembly is not None else None
     how = ""
     if size == "auto":
         from engine.body.measure import measure
@@ -40,30 +42,35 @@ def dxf_garment(path: Path, body: Body, size: str | None):
         m = measure(body)
         size, why = recommend_size(pattern, {"chest": 100 * m.bust, "hips": 100 * m.hips})
         how = f", {why}"
-    imp = import_pattern(path, size, pattern=pattern)
-    if imp.kind == "pieces":
+    imp = import_pattern(path, size, assembly=asm, pattern=pattern)
+    if imp.kind == "pieces" and asm is None:
         raise InputError(f"{path.name}: {'; '.join(imp.unsure)}")
     return imp.spec, _roles_placement(imp.spec, body), f"{path.name} (size {imp.size}{how})"
 
 
-def dxf_sizes(path: Path, body: Body) -> tuple[list[str], int]:
+def dxf_sizes(path: Path, body: Body, units: str | None = None) -> tuple[list[str], int]:
     """--size auto on a DXF: (its sizes, the index of the one its girths recommend)."""
     from engine.body.measure import measure
     from engine.pattern.dxf_read import read_pattern
     from engine.pattern.dxf_size import recommend_size
 
-    pattern = read_pattern(path)
+    pattern = read_pattern(path, units)
     m = measure(body)
     first, _ = recommend_size(pattern, {"chest": 100 * m.bust, "hips": 100 * m.hips})
     return list(pattern.sizes), pattern.sizes.index(first)
 
 
-def resolve_garment(arg: str, body: Body, size: str | None = "M"):
+def resolve_garment(arg: str, body: Body, size: str | None = "M", units: str | None = None,
+                    assembly: str | None = None):
     """Returns (PatternSpec, placement function or None for the spec's own, display name).
-    size: catalogue size; None means the default (M) for catalogue garments."""
+    size: catalogue size; None means the default (M) for catalogue garments. units, assembly:
+    a DXF's (dxf_garment)."""
     path = Path(arg)
-    if is_dxf(arg):  # a cutting pattern: its seams inferred, in one of its sizes
-        return dxf_garment(path, body, size)
+    if is_dxf(arg):  # a cutting pattern: its seams inferred (or its assembly's), in one of its sizes
+        return dxf_garment(path, body, size, units, assembly)
+    if units is not None or assembly is not None:
+        raise InputError(f"--units and --assembly go with a DXF pattern; '{path.name}' is not one (a GarmentCode "
+                         "pattern has its own stitches and placement)")
     if path.suffix.lower() == ".json" or path.exists():
         if size is not None:
             raise InputError(f"--size {size} applies to catalogue garments; a pattern file ({path.name}) "
@@ -148,9 +155,10 @@ def arms_in_the_way(err: Exception, body: Body) -> bool:
     return True
 
 
-def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
+def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None, dxf: dict | None = None):
     """Resolve GARMENT and dress the body with `dress(spec, place, name, **kw) -> (result, report)`
-    (kw: `lift`, passed on to engine.scene.tryon.run_tryon).
+    (kw: `lift`, passed on to engine.scene.tryon.run_tryon). dxf: a DXF's `units` and `assembly`
+    (resolve_garment).
     With --size auto on a catalogue garment, the size recommended from the body's girths comes
     first; if it comes out too small -- its drape refused it (seams that cannot close, cloth
     stretched past DrapeTuning.too_tight) or ended tight (report["tight"]) -- the next larger
@@ -213,13 +221,14 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None):
             return loaded
         return res
 
+    dxf = dxf or {}
     if (arg not in CATALOGUE and not is_dxf(arg)) or size != AUTO:
         try:
-            return attempt(lambda b: resolve_garment(arg, b, size))
+            return attempt(lambda b: resolve_garment(arg, b, size, **dxf))
         except SimulationError as e:
             add_size_hint(e, arg, body, size)  # (only a too-small error; not the arms in the way)
             raise
-    return _dress_auto(arg, body, attempt, note)
+    return _dress_auto(arg, body, attempt, note, dxf)
 
 
 def _verdict(report: dict) -> str:
@@ -231,19 +240,22 @@ def _verdict(report: dict) -> str:
     return "fits"
 
 
-def _auto_sizes(arg: str, body: Body):
+def _auto_sizes(arg: str, body: Body, dxf: dict):
     """(the garment's sizes, smallest first; the index of the one the body's girths choose;
     make(arg, body, size) -> (spec, placement, name)): a DXF's own sizes, else the catalogue's."""
     from engine.garment.catalogue import make_garment
     from engine.pattern.catalogue import SIZES, recommend_size
 
     if is_dxf(arg):
-        sizes, first = dxf_sizes(Path(arg), body)
-        return sizes, first, dxf_garment
+        sizes, first = dxf_sizes(Path(arg), body, dxf.get("units"))
+
+        def make(arg, b, s):
+            return dxf_garment(Path(arg), b, s, **dxf)
+        return sizes, first, make
     return list(SIZES), SIZES.index(recommend_size(arg, body)), make_garment
 
 
-def _dress_auto(arg: str, body: Body, attempt, note=None):
+def _dress_auto(arg: str, body: Body, attempt, note=None, dxf: dict | None = None):
     """--size auto (dress_in_size): from the size the body's girths choose, one size larger while
     it comes out too small (refused, or tight) -- up to AUTO_TRIES larger --, one smaller while it
     comes out too large (slid down the body, or slid off it), never a size twice. A size that
@@ -251,7 +263,7 @@ def _dress_auto(arg: str, body: Body, attempt, note=None):
     slid) with a warning naming every size tried and why, or the last refusal raised."""
     from engine.errors import SimulationError
 
-    sizes, first, make = _auto_sizes(arg, body)
+    sizes, first, make = _auto_sizes(arg, body, dxf or {})
     i = first
     tried: list[dict] = []
     ended: dict[str, tuple] = {}  # size -> (result, report, verdict, size) of drapes that ended

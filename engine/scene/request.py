@@ -17,7 +17,9 @@ class TryOnOptions(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    fabric: str = Field("cotton", description="cotton, denim, silk or jersey")
+    fabric: str | None = Field(None, description="cotton, denim, silk, jersey or stretch_knit (elastane jersey: "
+                               "leggings); default: the pattern's own -- a DXF of a stretch knit garment suggests "
+                               "stretch_knit -- else cotton")
     resolution_cm: float = Field(1.5, ge=0.2, le=20.0, description="cloth edge length, cm")
     texel_mm: float = Field(5.0, ge=0.5, le=50.0, description="collision map texel, mm (seed 003 §5.4: 5 mm)")
     collision: Literal["image", "object"] = Field("image", description="image (depth/normal maps) or object (BVH)")
@@ -47,6 +49,8 @@ class TryOnOptions(BaseModel):
     @field_validator("fabric")
     @classmethod
     def _known_fabric(cls, v):
+        if v is None:
+            return v
         try:
             get_fabric(v)
         except InputError as e:  # (it names the fabrics)
@@ -115,3 +119,8 @@ class TryOnRequest(TryOnOptions):
                              "width, with ease), then by draping: the next larger while it comes out too small "
                              "(refused, or tight), up to two more, the next smaller while it slides down the body; "
                              "when none fits, the report says so. Not for GarmentCode patterns")
+    assembly: str | None = Field(None, description="with a DXF pattern: an assembly file (JSON) to use instead of "
+                                 "the inferred seams -- the assembly.json `tryon pattern import` writes, corrected "
+                                 "(it serves every size), or GarmentCode's kind (the service: upload it with the DXF)")
+    units: str | None = Field(None, description="with a DXF that does not say its units: mm, cm, m or in (the "
+                              "service: upload them with the DXF)")

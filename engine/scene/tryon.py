@@ -85,11 +85,12 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
         raise InputError("dressing with the arms raised and lowering them needs the image-space collision "
                          "(--collision image)")
     loaded, body = body, (lift.raised if lift is not None else body)  # the body sewn and draped on
+    request, fabric_why = with_fabric(request, spec)
+    fab = get_fabric(request.fabric)
     sew_note = None
     if tuning.sew.friction is None:
-        friction, sew_note = sewing_friction(body)
+        friction, sew_note = sewing_friction(body, fab)
         tuning = replace(tuning, sew=replace(tuning.sew, friction=friction))
-    fab = get_fabric(request.fabric)
     t_all = time.perf_counter()
     # the body's BVH for the exact penetration figures at the end, built on the other core while
     # this thread meshes and places the panels and renders the maps (its kernels release the GIL)
@@ -139,7 +140,8 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     iters = sum(res.iterations.values())
     tc, tk = res.timing["cloth_total"], res.timing["collision_total"]
     report = {
-        "body": body.name, "garment": source, "fabric": request.fabric, "collision": request.collision,
+        "body": body.name, "garment": source, "fabric": request.fabric, "fabric_why": fabric_why,
+        "collision": request.collision,
         "cloth_vertices": int(len(res.positions)),
         "cloth_vertices_unsewn": int(garment.n_vertices),
         "iterations": int(iters),
@@ -186,12 +188,15 @@ def dress_request(body: Body, request: TryOnRequest, tuning: Tuning = Tuning(), 
     """Dress `body` in request.garment, in request.size (auto: chosen from the body's girths, then
     by draping: engine.scene.garments.dress_in_size), as the command line and the service do.
     note(size, why, next size): called before --size auto dresses a larger size. label: the
-    garment's name in the report (default: the catalogue's, or the pattern file's)."""
+    garment's name in the report, in place of the pattern file's name (default: the catalogue's,
+    or the pattern file's)."""
     def dress(spec, place, name, **kw):
-        return run_tryon(body, spec, request, tuning, place=place, source=label or name, progress=progress,
+        source = name.replace(Path(request.garment).name, label, 1) if label else name
+        return run_tryon(body, spec, request, tuning, place=place, source=source, progress=progress,
                          observer=observer, **kw)
 
-    return dress_in_size(request.garment, body, request.size, dress, note=note)
+    return dress_in_size(request.garment, body, request.size, dress, note=note,
+                         dxf={"units": request.units, "assembly": request.assembly})
 
 
 def _body_collider(body: Body, plan: TryOnPlan, request: TryOnOptions, tolerance: float):
@@ -238,10 +243,35 @@ def _carried_hint(err: Exception, placement_note: str | None, slid: bool = False
 ARMS_CLOSE_SEW_FRICTION = 1.0
 
 
-def sewing_friction(body: Body) -> tuple[float, str | None]:
-    """(friction scale while sewing, why) for this body: see ARMS_CLOSE_SEW_FRICTION."""
+# a fabric whose strain threshold is at least this is worn stretched (elastane knits): friction
+# holds it where it is sewn, as it holds leggings up (without it the stretched cloth slides down the
+# body, while it is sewn, to where it is least stretched)
+WORN_STRETCHED = 0.20
+
+
+def with_fabric(request: TryOnOptions, spec: PatternSpec) -> tuple[TryOnOptions, str]:
+    """The request with its fabric named -- the user's, else the pattern's own, else
+    DEFAULT_FABRIC -- and why."""
+    from engine.cloth.fabrics import DEFAULT_FABRIC
+
+    if request.fabric is not None:
+        return request, "asked for"
+    own = spec.tryon.fabric if spec.tryon is not None else None
+    if own:
+        get_fabric(own)  # (a pattern file's unknown fabric: InputError naming the fabrics)
+        why = f"the pattern's: {spec.tryon.fabric_why}" if spec.tryon.fabric_why else "the pattern's own"
+        return request.model_copy(update={"fabric": own}), why
+    return request.model_copy(update={"fabric": DEFAULT_FABRIC}), "the default"
+
+
+def sewing_friction(body: Body, fabric=None) -> tuple[float, str | None]:
+    """(friction scale while sewing, why) for this body and fabric: see WORN_STRETCHED and
+    ARMS_CLOSE_SEW_FRICTION."""
     from engine.body.measure import ARM_GAP_BELOW, ARM_GAP_OK, measure
 
+    if fabric is not None and fabric.strain_threshold >= WORN_STRETCHED:
+        return 1.0, (f"{fabric.name} is worn stretched: friction holds it where it is sewn (without it the "
+                     "cloth slides down the body to where it is least stretched)")
     try:
         m = measure(body)
     except InputError:  # a body the measurements cannot read: the default

@@ -18,7 +18,7 @@ class SewTuning:
     weld_gap: float | None = None  # m: a pair this close is welded (None: half a cloth edge)
     tau: float = 0.02  # s: an open pair is pulled to close its gap in this time ...
     vmax: float = 3.0  # m/s: ... at most this fast
-    far_gap: float = 0.2  # m: stitch pairs this far apart (median) are a flat layout round the body (GarmentCode's)
+    far_gap: float = 0.2  # m: stitch pairs this far apart (90th percentile) are a flat layout round the body (GarmentCode's)
     far_retry_vmax: float = 1.5  # m/s: a flat layout whose seams stopped closing is sewn again, pulled this fast (0: not)
     retry_stall: float = 0.25  # s: ... judged stalled when its widest gap shrank < 1 mm over two windows this long
     damping: float = 20.0  # x the viscous damping while sewing (no flapping) ...

@@ -32,6 +32,10 @@ class Hang(Exception):
     pass
 
 
+class TimeUp(Exception):
+    """--seconds ran out: ends the run (hypothesis would otherwise go on drawing inputs unused)."""
+
+
 def _hang(*_):
     raise Hang()
 
@@ -86,7 +90,7 @@ def run_target(name: str, n: int, seconds: float, out: Path) -> dict:
     @given(st.one_of([inputs(target.kind, s) for s in seeds]))
     def one(raw: bytes) -> None:
         if time.monotonic() > t_end:
-            return
+            raise TimeUp()
         t0 = time.perf_counter()
         outcome, detail = _classify(target, raw)
         dt = time.perf_counter() - t0
@@ -101,7 +105,10 @@ def run_target(name: str, n: int, seconds: float, out: Path) -> dict:
             (out / f"{name}-{key}.bin").write_bytes(raw)
             failures.append({"file": f"{name}-{key}.bin", "outcome": outcome, "detail": detail})
 
-    one()
+    try:
+        one()
+    except TimeUp:
+        pass
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     return {"target": name, "inputs": sum(counts.values()), **dict(counts), "slowest_s": round(worst[0], 3),
             "peak_rss_mb": round(peak), "failures": failures[:50], "failed": len(failures)}

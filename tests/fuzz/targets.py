@@ -145,6 +145,56 @@ def _dxf_with(dxf: bytes, asm: bytes):
         return spec
 
 
+def _named_pieces_dxf(pieces: list[tuple[str, list]]) -> bytes:
+    """A small pattern-CAD-like DXF (mm): a block per piece with its cut line (layer 1), turn
+    points (2), grain line (7) and name, inserted side by side."""
+    import ezdxf
+
+    doc = ezdxf.new("R12")
+    for k, (name, pts) in enumerate(pieces):
+        blk = doc.blocks.new(f"P{k}")
+        blk.add_polyline2d(pts, close=True, dxfattribs={"layer": "1"})
+        for q in pts:
+            blk.add_point(q, dxfattribs={"layer": "2"})
+        blk.add_text(f"Piece Name: {name}", dxfattribs={"layer": "1"})
+        blk.add_line((0, 100), (0, 500), dxfattribs={"layer": "7"})
+        doc.modelspace().add_blockref(f"P{k}", (k * 700, 0))
+    doc.modelspace().add_text("Units: METRIC")
+    out = io.StringIO()
+    doc.write(out)
+    return out.getvalue().encode()
+
+
+@lru_cache(maxsize=None)
+def _alone_seeds() -> tuple[bytes, ...]:
+    """A tee's front and back, and a one-piece leg with its waistband: garments the inference
+    builds (shoulders, sides; rises, inseams, a band round the waist)."""
+    half = [(250, 0), (250, 480), (220, 560), (185, 680), (80, 710)]
+    mirror = [(-x, y) for x, y in reversed(half)]
+    tee = [("FRONT", mirror + [(0, 640)] + half), ("BACK", mirror + [(0, 690)] + half)]
+    legs = [("LEG", [(-100, 0), (100, 0), (230, 700), (170, 930), (-180, 960), (-270, 690)]),
+            ("WAISTBAND", [(-350, 0), (350, 0), (350, 60), (-350, 60)])]
+    return _named_pieces_dxf(tee), _named_pieces_dxf(legs)
+
+
+def _dxf_alone(data: bytes):
+    """A DXF alone, as the service reads an upload: every size read, the garment inferred in the
+    default size (refused when none can be), checked, its seam picture drawn."""
+    from engine.errors import InputError
+    from engine.pattern.dxf import import_pattern
+    from engine.pattern.dxf_read import read_pattern
+    from engine.pattern.validate import check
+
+    with tempfile.TemporaryDirectory() as d:
+        (Path(d) / "p.dxf").write_bytes(data)
+        imp = import_pattern(Path(d) / "p.dxf", pattern=read_pattern(Path(d) / "p.dxf"))
+    if imp.kind == "pieces":
+        raise InputError("; ".join(imp.unsure))
+    check(imp.spec, source="p.dxf")
+    imp.svg()
+    return imp.spec
+
+
 TARGETS = {t.name: t for t in [
     *(_mesh_target(f) for f in ("obj", "ply", "stl", "off", "glb")),
     _animation_target("glb_anim", ".glb", _anim_glb_seeds),
@@ -153,6 +203,7 @@ TARGETS = {t.name: t for t in [
            _pattern_finite),
     Target("dxf", "text", lambda: [_dxf_pair()[0]], lambda b: _dxf_with(b, _dxf_pair()[1]), _pattern_finite),
     Target("assembly", "json", lambda: [_dxf_pair()[1]], lambda b: _dxf_with(_dxf_pair()[0], b), _pattern_finite),
+    Target("dxf_alone", "text", lambda: list(_alone_seeds()), _dxf_alone, _pattern_finite),
 ]}
 
 

@@ -42,7 +42,7 @@ def viewer_page(jid: str, request: Request, s: SettingsDep, db: DBDep, keys: Key
                                  + ("yet (it has not started)" if row["status"] == "queued" else ""))
     else:
         resp = HTMLResponse((Path(viser.__file__).parent / "client" / "build" / "index.html").read_text())
-    resp.set_cookie(VIEWER_COOKIE, keys.job_key(jid), path=f"/viewer/{jid}", httponly=True, samesite="strict",
+    resp.set_cookie(VIEWER_COOKIE, keys.link_key(jid), path=f"/viewer/{jid}", httponly=True, samesite="strict",
                     secure=request.url.scheme == "https", max_age=int(s.link_seconds))
     return resp
 
