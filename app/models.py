@@ -51,6 +51,8 @@ def job_public(row: dict, data_dir: Path, key: str) -> dict:
     -- their links signed with the job's `key` (short-lived; app/core/security.py)."""
     out = {k: row[k] for k in ("id", "status", "progress", "stage", "message", "error", "attempts")}
     out["request"] = json.loads(row["request"])
+    # the whole job's time, from its (last) start: every size --size auto dressed, and the walk
+    out["seconds"] = row["finished"] - row["started"] if row["finished"] and row["started"] else None
     d = result_dir(data_dir, row)
     if row["status"] == "done":
         out["report"] = json.loads(row["report"] or "{}")

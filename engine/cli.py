@@ -64,6 +64,17 @@ def _body(spec: str, up: Optional[str], front: Optional[str]):
     return body
 
 
+def _dressable(spec: str, up: Optional[str], front: Optional[str]):
+    """_body, with the hands moved off the hips where they touch them (engine.scene.arms.clear_hands)."""
+    from engine.scene.arms import clear_hands
+
+    loaded = _body(spec, up, front)
+    body = clear_hands(loaded)
+    if body is not loaded:
+        typer.echo(f"note: {body.notes[-1]}", err=True)
+    return body
+
+
 @body_app.command("info")
 def body_info(
     body: str = typer.Argument(..., help=BODY_HELP),
@@ -134,8 +145,8 @@ def render_cmd(
     _run(go)
 
 
-def _size_note(size: str, why: str, larger: str) -> None:
-    typer.echo(f"note: size {size} came out too small ({why}); trying {larger}", err=True)
+def _size_note(size: str, why: str, other: str) -> None:
+    typer.echo(f"note: size {size} did not fit ({why}); trying {other}", err=True)
 
 
 def _progress_printer():
@@ -210,7 +221,7 @@ def drape_cmd(request, body: str = typer.Option(..., "--body", help=BODY_HELP),
         from engine.errors import SimulationError
         from engine.scene.tryon import dress_request, write_outputs
 
-        b = _body(body, up, front)
+        b = _dressable(body, up, front)
         prog, update = _progress_printer()
         with prog:
             try:
@@ -273,7 +284,7 @@ def walk_cmd(request, body: str = typer.Option(..., "--body", help=BODY_HELP),
             for line in track.notes:
                 typer.echo(f"note: {line}", err=True)
         else:
-            b = _body(body, up, front)
+            b = _dressable(body, up, front)
         walker = b if track is not None else walking_body(b)
         if walker is not b:  # a scan: the default body's skeleton and weights were fitted to it
             typer.echo(f"note: {walker.notes[-1]}", err=True)

@@ -516,3 +516,19 @@ def test_settings_from_the_environment(monkeypatch, tmp_path):
         monkeypatch.setenv(name, value)
         with pytest.raises(InputError, match=f"{name}='{value}'"):
             read(Settings)
+
+
+def test_a_job_says_its_own_time(tmp_path):
+    """A try-on's `seconds` is the job's own, from its start to its end -- every size --size auto
+    dressed and the walk; the report's wall_seconds are the last drape's (the page said "in 7.4 s"
+    for a job that took 194 s); none while it runs."""
+    import json
+
+    from app.models import job_public
+
+    row = {"id": "j1", "status": "running", "progress": 0.5, "stage": "walking", "message": "", "error": None,
+           "attempts": 1, "request": json.dumps({"garment": "skirt"}), "report": None, "viewer_port": None,
+           "started": 1000.0, "finished": None, "result": None}
+    assert job_public(row, tmp_path, "k")["seconds"] is None
+    row.update(status="done", finished=1194.0, report=json.dumps({"wall_seconds": {"total": 7.4}}))
+    assert job_public(row, tmp_path, "k")["seconds"] == 194.0

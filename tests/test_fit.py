@@ -56,11 +56,12 @@ def _folded_edges(rest: np.ndarray, posed: np.ndarray, faces: np.ndarray) -> np.
 def test_the_sample_scan_walks_without_its_skin_folding():
     """The weights a scan takes from the nearest template vertex jump where the mapped template
     is off the scan by more than its edges; fit_rig smooths them over the scan's surface below
-    the waist (smooth_weights). Measured on the sample scan walking 2 s (every 2nd frame), edges
-    folded: 1,220 in all before, 75 in the worst frame (its knees and groin crumpled, and the
-    dress showed it), 1,159 of them below the waist; 69 after, 16 below the waist (the rest at
-    the armpits, whose weights stay as transferred). The weights stay a convex mix:
-    non-negative, summing to 1; above the waist they are the transferred ones."""
+    the waist and along the arms past the shoulders (smooth_weights). Measured on the sample
+    scan walking 2 s (every 2nd frame), edges folded: 1,220 in all before, 75 in the worst frame
+    (its knees and groin crumpled, and the dress showed it), 1,159 of them below the waist; 69
+    after smoothing below the waist over 4 cm, 16 below the waist; with the closest build, the
+    arms fitted by search and smoothed too, and 5 cm below the waist: 56, 2 below the waist
+    (the rest at the armpits). The weights stay a convex mix: non-negative, summing to 1."""
     from engine.body.measure import measure
     from engine.body.motion import WalkParams, walk_track
     from tests.samples import SAMPLE_BODY
@@ -76,8 +77,8 @@ def test_the_sample_scan_walks_without_its_skin_folding():
         e = _folded_edges(fitted.vertices, track.vertices(i), fitted.faces)
         folded.append(len(e))
         folded_below.append(int(below[e].all(axis=1).sum()))
-    assert max(folded) <= 12 and sum(folded) <= 120, folded
-    assert sum(folded_below) <= 30, folded_below
+    assert max(folded) <= 12 and sum(folded) <= 90, folded
+    assert sum(folded_below) <= 10, folded_below
 
 
 def test_smoothing_keeps_a_single_joint_and_blends_a_jump():

@@ -545,11 +545,34 @@ def test_object_space_walk(walked):
     assert r["map_frames_rendered"] >= 15  # one refit per frame
 
 
+def test_stiffening_looks_at_a_region_not_at_one_spring(walked):
+    """spread_strain: the n-th most stretched spring. One vertex pulled out stretches the few
+    springs round it (a seam's end: the trousers' waistband at the side seam reached 16-23 % at
+    one spring, the next most stretched under 11 %, and stiffened every walk of them); the walk
+    stiffens when WalkTuning.stiffen_springs springs pass the bar (or one passes it three times over)."""
+    from engine.scene.walk import spread_strain
+
+    _, res, _, _ = walked
+    m = res.model
+    x = res.positions.copy()
+    base = spread_strain(m, x, 8)
+    s = m.springs[m.strain_limited]
+    v = s[0, 0]
+    away = x[v] - x[s[0, 1]]
+    x[v] += 0.5 * away  # its springs 50 % longer and more, the rest as draped
+    near = int(np.sum(np.any(s == v, axis=1)))
+    assert 1 <= near < 8 and spread_strain(m, x, 1) > 0.3
+    assert abs(spread_strain(m, x, 8) - base) < 0.02
+    x[:, 0] *= 1.2  # the whole garment 20 % wider: every horizontal spring past the bar
+    assert spread_strain(m, x, 8) > 0.15
+
+
 @pytest.mark.parametrize("make,words", [
     (lambda: StepConfig(contact_rounds=0), "contact_rounds"),
     (lambda: TryOnOptions.of(walk_stiffness=0.0), "walk_stiffness"),
     (lambda: TryOnOptions.of(walk_stiffness=1.5), "walk_stiffness"),
     (lambda: Tuning(walk=WalkTuning(stiffen_at=0.0)).validate(), "stiffen_at"),
+    (lambda: Tuning(walk=WalkTuning(stiffen_springs=0)).validate(), "stiffen_springs"),
     (lambda: Tuning(collide_every=17).validate(), "collide_every"),
     (lambda: StepConfig(vm_passes=0), "vm_passes"), (lambda: StepConfig(strain_guard=-0.1), "strain_guard"),
     (lambda: StepConfig(flexion_every=0), "flexion_every"), (lambda: StepConfig(flexion_every=17), "flexion_every"),

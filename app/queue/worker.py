@@ -210,7 +210,9 @@ def _run(req: dict, out: Path, progress, live=None) -> dict:
         track = load_animation(b["animation"], float(b.get("fps", 30.0)))
         body = track.body
     else:
-        body = resolve_body(b["spec"] if "spec" in b else b["file"])
+        from engine.scene.arms import clear_hands
+
+        body = clear_hands(resolve_body(b["spec"] if "spec" in b else b["file"]))
     g = req["garment"]
     walking = req.get("motion", "none") == "walk"
     from app.queue.live_view import LiveView
@@ -230,8 +232,8 @@ def _simulate(req, body, g, walking, out, progress, view, track=None) -> dict:
 
     retry = [""]  # while --size auto dresses a larger size, every progress message says why
 
-    def note(size, why, larger):
-        retry[0] = f"size {size} came out too small, trying {larger} -- "
+    def note(size, why, other):
+        retry[0] = f"size {size} did not fit, trying {other} -- "
 
     catalogue = "name" in g
     options = {k: req[k] for k in TryOnOptions.model_fields if k in req}  # (as posted: app/services/tryons.py)

@@ -105,6 +105,7 @@ def default_body(
     proportions: float | None = None,
     gender: float | None = None,
     age: float | None = None,
+    cache: bool = True,
     **unknown: float,
 ) -> Body:
     """The default parametric body (ANNY), rigged, in the world frame of DESIGN.md.
@@ -112,10 +113,14 @@ def default_body(
     preset: "female" or "male" (adults, 30 years, average build; 1.65 m / 1.78 m).
     height: stature in metres (1.40..2.10); weight, muscle, proportions: 0..1 (0.5 average);
     gender: 0 (male) .. 1 (female); age: ANNY age 0.77 (18 years) .. 1.0. Given values override
-    the preset. Raises InputError on unknown presets, unknown names and out-of-range values.
+    the preset. cache: False builds without reading or writing the disk cache (the many
+    candidate bodies engine.body.fit compares with a scan).
+    Raises InputError on unknown presets, unknown names and out-of-range values.
     """
     given = dict(height=height, weight=weight, muscle=muscle, proportions=proportions, gender=gender, age=age)
     preset, params = check_params(preset, {**{k: v for k, v in given.items() if v is not None}, **unknown})
+    if not cache:
+        return _build(preset, params)
     path = _cache_path(preset, params)
     body = _load_cached(path)
     if body is None:

@@ -1,7 +1,7 @@
 """Load a body scan (OBJ, PLY, STL, OFF, GLB/glTF) and normalise it to the world frame of
 DESIGN.md: metres, Y up, facing +Z, feet on y = 0, centred on x = z = 0 (bounding-box centre).
 
-Units come from a plausible human height; the up axis from the shape (standing human: the long
+Units come from a plausible human height (metres, dm, cm, mm or inches; an adult's where two fit); the up axis from the shape (standing human: the long
 axis; the end with the flat soles is down); the front from the feet (toes point forward) and the
 face. Messy scans are repaired (duplicate vertices merged, degenerate faces and tiny floating
 bits dropped, holes closed, a floor plate under the feet dropped) and every decision is
@@ -31,8 +31,10 @@ from engine.settings import current
 
 SUPPORTED = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0), "-z": (2, -1.0)}
-UNITS = ((1.0, "metres"), (0.1, "decimetres"), (0.01, "centimetres"), (0.001, "millimetres"))
-HUMAN_HEIGHT = (0.5, 2.5)  # m; the unit scales give non-overlapping raw ranges
+UNITS = ((1.0, "metres"), (0.1, "decimetres"), (0.01, "centimetres"), (0.001, "millimetres"), (0.0254, "inches"))
+HUMAN_HEIGHT = (0.5, 2.5)  # m; the metric scales give non-overlapping raw ranges ...
+ADULT_HEIGHT = (1.3, 2.3)  # m: ... inches overlap centimetres (70 units: 1.78 m or 0.70 m): the adult
+# reading wins, and inches are taken for adults only
 MAX_PARTS = 512  # mesh parts placed in a scene file (one small part placed thousands of times took minutes)
 TINY_PIECE = 0.01  # drop components under this fraction of the total surface area
 
@@ -160,10 +162,12 @@ def _read(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _units(extent: float, name: str) -> tuple[float, str]:
-    for scale, unit in UNITS:
-        if HUMAN_HEIGHT[0] <= extent * scale <= HUMAN_HEIGHT[1]:
-            return scale, unit
-    raise InputError(f"{name} is not human-sized: {extent:.4g} units tall fits no unit (m, dm, cm, mm) "
+    fits = [(scale, unit) for scale, unit in UNITS if HUMAN_HEIGHT[0] <= extent * scale <= HUMAN_HEIGHT[1]]
+    adult = [(scale, unit) for scale, unit in fits if ADULT_HEIGHT[0] <= extent * scale <= ADULT_HEIGHT[1]]
+    fits = [(scale, unit) for scale, unit in fits if unit != "inches"]  # inches only for an adult
+    if adult or fits:
+        return (adult or fits)[0]
+    raise InputError(f"{name} is not human-sized: {extent:.4g} units tall fits no unit (m, dm, cm, mm, inches) "
                      f"for a {HUMAN_HEIGHT[0]}-{HUMAN_HEIGHT[1]} m person: check the file or its scale")
 
 
@@ -238,7 +242,35 @@ def _fill_holes(v: np.ndarray, f: np.ndarray, name: str, notes: list[str]):
         notes.append(f"{len(loops)} hole(s) could not be closed (MeshFix failed on this mesh)")
         return v, f, None
     v2, f2 = _clean(v2, f2, name, [])
-    return v2, f2, (len(loops), float(loops.max()))
+    return _faired(v, v2, f2), f2, (len(loops), float(loops.max()))
+
+
+def _faired(v0: np.ndarray, v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """The vertices MeshFix added (those not among the scan's own, v0) moved to where the
+    surface bends on smoothly from the scan round them: bi-Laplacian (thin-plate) fairing with
+    the scan's vertices fixed, L^2 x = 0 on the new ones (uniform weights). MeshFix's patches are
+    flat, and a flat crown takes centimetres off the height."""
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import spsolve
+
+    d, _ = cKDTree(v0).query(v)
+    new = d > 1e-9 * max(float(np.ptp(v0, axis=0).max()), 1e-12)
+    if not new.any() or new.all():
+        return v
+    n = len(v)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    adj = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
+    adj = ((adj + adj.T) > 0).astype(np.float64)
+    deg = np.asarray(adj.sum(axis=1)).ravel()
+    lap = sp.diags(1.0 / np.maximum(deg, 1.0)) @ adj - sp.eye(n)
+    bi = (lap @ lap).tocsr()
+    a = bi[new][:, new].tocsc()
+    b = -(bi[new][:, ~new] @ v[~new])
+    out = v.copy()
+    out[new] = spsolve(a, b).reshape(-1, 3)
+    if not np.isfinite(out).all():
+        return v
+    return out
 
 
 FLOOR_THICK = 0.03  # m: a separate piece at most this tall, lying under the feet ...

@@ -205,7 +205,10 @@ class Measurements:
     arm_root: float = float("nan")  # ARM_ROOT_BELOW under the armpits: the mean perimeter (convex
     # hull) of the two arms' horizontal cuts -- oblique on an arm held out, so larger than the
     # arm's girth; how thick the arm is where an armhole goes round it
+    hand_gap: float = float("nan")  # the smallest gap between an arm hanging below the waist and
+    # the torso or legs beside it (0 where they touch or overlap; NaN: no arm reaches there)
     notes: list[str] = field(default_factory=list)
+    estimated: list[str] = field(default_factory=list)  # landmarks not found, estimated from the stature
 
     def to_dict(self) -> dict:
         """Centimetres rounded to 0.1 (None where not measurable), plus "units": "cm"."""
@@ -231,6 +234,9 @@ class Measurements:
 
 STEP = 0.005  # m between profile cuts; landmarks are then refined by bisection
 ARMPIT_CUTS = 3  # the armpits: where the torso cut widens by a quarter within this many cuts up
+# ... and below that, cuts still narrowing faster than this (m of width per m of height) going
+# down are the fold of skin under a raised arm, not yet the torso (a torso widens more slowly)
+FOLD_NARROWING = 1.6
 ARM_GAP_BELOW = 0.10  # m below the armpits where Measurements.arm_gap is taken
 ARM_ROOT_BELOW = 0.03  # m below the armpits where Measurements.arm_root is taken
 # The gap from which the seams beside the arms (over the shoulders, under the arms) are sewn
@@ -338,13 +344,13 @@ def _measure(body) -> Measurements:
     prof = _Profile(v, f, ax)
 
     crotch = _find_crotch(prof, h, m)
-    if not np.isfinite(crotch):
-        return m
+    if not np.isfinite(crotch):  # legs together: the girths below it go round both
+        crotch = _estimated(m, "crotch height", PROPORTIONS["crotch"] * h)
     m.crotch_height = m.inseam = crotch
 
     armpit = _find_armpit(prof, h, crotch, m)
-    if not np.isfinite(armpit):
-        return m
+    if not np.isfinite(armpit):  # arms pressed to the torso all along: its girths take them in
+        armpit = _estimated(m, "armpit height", PROPORTIONS["armpit"] * h)
 
     m.armpit_height = armpit
     m.arm_gap = _arm_gap(prof, armpit - ARM_GAP_BELOW)
@@ -356,11 +362,25 @@ def _measure(body) -> Measurements:
                        "and where the seams beside the arms do not close, sewn again with the arms raised "
                        "and then lowered (slower)")
     _torso_girths(prof, h, crotch, armpit, m)
+    m.hand_gap = _hand_gap(prof, armpit, m.waist_height)
     _knee(prof, h, crotch, m)
-    acromion = _shoulders(v, prof, h, armpit, m)
+    acromion = _shoulders(v, f, prof, h, armpit, m)
     if acromion is not None:
-        _arms(prof, h, armpit, acromion, m)
+        _arms(v, f, prof, armpit, acromion, m)
+    else:
+        m.shoulder_height = _estimated(m, "shoulder height", armpit + PROPORTIONS["shoulder_over_armpit"] * h)
     return m
+
+
+# Where a landmark is not found, its height is estimated from the stature (and the armpits), so that
+# what needs it (a garment's placement) can go on; the notes say which
+PROPORTIONS = {"crotch": 0.46, "armpit": 0.755, "shoulder_over_armpit": 0.075}
+
+
+def _estimated(m: Measurements, what: str, value: float) -> float:
+    m.notes.append(f"{what} estimated as {100 * value:.1f} cm from the stature (not found: see above)")
+    m.estimated.append(what)
+    return float(value)
 
 
 def _find_crotch(prof: _Profile, h: float, m: Measurements) -> float:
@@ -368,13 +388,14 @@ def _find_crotch(prof: _Profile, h: float, m: Measurements) -> float:
     idx = prof.index_range(0.3 * h, 0.65 * h)
     has_central = np.array([prof.central[i] is not None for i in idx])
     if len(idx) == 0 or has_central.all() or not has_central.any():
-        m.notes.append("could not find the crotch (legs not separated?): lower-body measures skipped")
+        m.notes.append("could not find the crotch: the legs are not apart from each other (a scan with the legs "
+                       "together, or a long skirt)")
         return float("nan")
     # Scan down from the top of the window: the first cut without a central piece.
     top_true = np.nonzero(has_central)[0].max()
     below = [k for k in range(top_true, -1, -1) if not has_central[k]]
     if not below:
-        m.notes.append("could not find the crotch: lower-body measures skipped")
+        m.notes.append("could not find the crotch: no cut where the legs are apart")
         return float("nan")
     k = below[0]
     y_false = prof.ys[idx[k]]
@@ -397,7 +418,8 @@ def _find_armpit(prof: _Profile, h: float, crotch: float, m: Measurements) -> fl
         drop = width < 0.8 * above.max(axis=0)
     ks = np.nonzero(drop)[0]
     if len(ks) == 0:
-        m.notes.append("could not find the armpits: upper-body measures skipped")
+        m.notes.append("could not find the armpits: the torso does not narrow under the arms anywhere (arms pressed "
+                       "to the torso all along?); the chest and waist may take the arms in")
         return float("nan")
     k = ks.max()
     j = 1 + int(np.argmax(above[:, k]))
@@ -408,14 +430,22 @@ def _find_armpit(prof: _Profile, h: float, crotch: float, m: Measurements) -> fl
         p = prof.central_piece(prof.cut(y))
         return p is not None and (p.xmax - p.xmin) < thresh
 
+    below = k
+    while below > 0 and width[below] - width[below - 1] > FOLD_NARROWING * STEP:
+        below -= 1
+    if below < k:  # the fold of skin between arm and torso (raised arms): the torso starts under it
+        return float(prof.ys[idx[below]])
     return _bisect(narrow, prof.ys[idx[k]], prof.ys[idx[k + j]])
 
 
 def _arm_gap(prof: _Profile, y: float) -> float:
     """The narrower horizontal gap between the torso's cut at height y and the arm beside it on
-    either side; 0 where no separate arm is cut beside the torso but the torso cut is much wider
-    than in the cut 2 cm below (the arm touches it); NaN where no arm hangs at that height (a
-    T-pose)."""
+    either side; for an arm's cut that overlaps the torso's in x (pressed against it, or into
+    it), the smallest distance between their points (~0); 0 where no separate arm is cut beside
+    the torso but the torso cut is much wider than in the cut 2 cm below (the arm touches it);
+    NaN where no arm hangs at that height (a T-pose)."""
+    from scipy.spatial import cKDTree
+
     pieces = prof.cut(y)
     core = prof.central_piece(pieces)
     if core is None:
@@ -424,8 +454,11 @@ def _arm_gap(prof: _Profile, y: float) -> float:
     merged = below is not None and (core.xmax - core.xmin) > 1.25 * (below.xmax - below.xmin)
     gaps = []
     for side, arms in zip((-1.0, 1.0), _beside(pieces, core)):
+        pressed = [p for p in _arm_pieces(prof, pieces, core, side) if all(p is not q for q in arms)]
         if arms:
             gaps.append(min((p.xmin - core.xmax) if side > 0 else (core.xmin - p.xmax) for p in arms))
+        elif pressed:
+            gaps.append(float(cKDTree(core.points).query(np.vstack([p.points for p in pressed]))[0].min()))
         elif merged:
             gaps.append(0.0)
     return float(min(gaps)) if gaps else float("nan")
@@ -451,63 +484,84 @@ def _arm_root(prof: _Profile, y: float) -> float:
 
 
 def _torso_girths(prof: _Profile, h: float, crotch: float, armpit: float, m: Measurements) -> None:
-    # Bust point: the most forward point of the torso in the chest region -- a peak of the front
-    # profile there, not the region's lower edge, where a belly can stand further forward
-    # (default:male at weight 1: the "bust point" was the belly, at the waist, and the bust,
-    # underbust and every size chosen from them came out n/a)
+    # Bust point: a forward peak of the torso's front profile in the chest region (_front_peak),
+    # not the region's lower edge, nor a belly standing further forward
     idx = prof.index_range(armpit - 0.12 * h, armpit - 0.01 * h)
     front = np.array([prof.central[i].points[:, 1].max() if prof.central[i] is not None else -np.inf
                       for i in idx])
-    i_apex = idx[_front_peak(front)]
+    i_apex = idx[_front_peak(front, int(round(PEAK_BELOW * h / STEP)), int(round(CHEST_UPPER * h / STEP)))]
     m.bust_height = float(prof.ys[i_apex])
 
-    # Waist: narrowest torso girth between the hips and the bust point.
+    # Waist: narrowest torso girth between the hips and the bust point; where the girth only
+    # grows from the hips up to there (a belly: no natural waist) WAIST_SHARE of the way from the
+    # crotch to the armpits, as ISO 8559-1 takes it half way between the ribs and the hip bone
     idx = prof.index_range(crotch + 0.1 * h, m.bust_height)
     g = np.array([prof.girth(i) for i in idx])
-    iw = idx[int(np.nanargmin(g))]
+    k = int(np.nanargmin(g))
+    if k >= len(idx) - 2:
+        k = int(np.argmin(np.abs(prof.ys[idx] - (crotch + WAIST_SHARE * (armpit - crotch)))))
+        m.notes.append("no natural waist (the torso narrows nowhere between the hips and the chest): the waist is "
+                       f"taken {100 * WAIST_SHARE:.0f} % of the way from the crotch to the armpits")
+    iw = idx[k]
     m.waist, m.waist_height = prof.girth(iw), float(prof.ys[iw])
 
     # Underbust: where the steep fall of the girth below the bust ends (knee of the profile:
     # the point farthest below the chord from the waist to the bust point).
     idx = np.arange(iw, i_apex + 1)
+    low = m.bust_height - 0.03 * h
     if len(idx) >= 3:
         g = np.array([prof.girth(i) for i in idx])
         chord = g[0] + (g[-1] - g[0]) * (prof.ys[idx] - prof.ys[idx[0]]) / (prof.ys[idx[-1]] - prof.ys[idx[0]])
         iu = idx[int(np.nanargmax(chord - g))]
         m.underbust = prof.girth(iu)
-        # Bust: largest girth from the underbust to just below the armpits.
-        idx = prof.index_range(prof.ys[iu], armpit - 0.01 * h)
-        g = np.array([prof.girth(i) for i in idx])
+        low = prof.ys[iu]
+    else:
+        m.notes.append("underbust not measured: the chest's front stands at the waist")
+    # Bust (chest): largest girth from the underbust (at most 3 % of the height under the bust
+    # point: not a belly's girth) to just below the armpits.
+    idx = prof.index_range(min(max(low, m.bust_height - 0.03 * h), m.bust_height), armpit - 0.01 * h)
+    g = np.array([prof.girth(i) for i in idx])
+    if np.isfinite(g).any():
         m.bust = float(np.nanmax(g))
 
     # Hips: largest girth between the crotch and the waist; a little below the crotch the
-    # tape goes around both legs (hull of the two leg pieces).
-    best, best_y = -np.inf, np.nan
+    # tape goes around both legs (hull of the two leg pieces). The hip height is that of the
+    # largest girth above the crotch (the seat): on men the thighs' hull under the crotch can be
+    # the largest, and a hip line under the crotch puts the landmarks out of order
+    best, best_y, seat, seat_y = -np.inf, np.nan, -np.inf, np.nan
     for i in prof.index_range(crotch - 0.03 * h, m.waist_height):
         if prof.ys[i] >= crotch:
             g = prof.girth(i)
+            if np.isfinite(g) and g > seat:
+                seat, seat_y = g, float(prof.ys[i])
         else:
             legs = _leg_pair(prof, prof.cuts[i])
             g = hull_perimeter(np.vstack([p.points for p in legs])) if legs else np.nan
         if np.isfinite(g) and g > best:
             best, best_y = g, float(prof.ys[i])
     if np.isfinite(best):
-        m.hips, m.hip_height = best, best_y
+        m.hips, m.hip_height = best, (seat_y if np.isfinite(seat_y) else best_y)
 
 
 BUST_PEAK_CUTS = 3  # a bust point stands at least as far forward as the cuts this far above and below
+PEAK_BELOW = 0.04  # x height: ... and PEAK_RISE further forward than every cut this far below it
+PEAK_RISE = 0.003  # m
+CHEST_UPPER = 0.06  # x height under the armpits: where a flat chest's front is looked for
+WAIST_SHARE = 0.58  # the waist's place between crotch and armpits where there is no narrowest girth
 
 
-def _front_peak(front: np.ndarray) -> int:
-    """Index of the most forward peak of a front profile (cuts bottom to top): a cut at least as
-    far forward as its BUST_PEAK_CUTS neighbours on each side, away from both ends; the most
-    forward cut when there is none."""
+def _front_peak(front: np.ndarray, below: int, upper: int) -> int:
+    """Index of the bust point in a front profile (cuts bottom to top): the highest cut at least
+    as far forward as its BUST_PEAK_CUTS neighbours on each side, away from both ends, that
+    stands PEAK_RISE forward of every cut up to `below` cuts under it (the chest, not a belly
+    further down); without one, the most forward of the top `upper` cuts (a flat chest over a
+    belly)."""
     k = BUST_PEAK_CUTS
-    best = -1
-    for j in range(k, len(front) - k):
-        if front[j] >= front[j - k:j + k + 1].max() and (best < 0 or front[j] > front[best]):
-            best = j
-    return best if best >= 0 else int(np.argmax(front))
+    for j in range(len(front) - k - 1, k - 1, -1):
+        if front[j] >= front[j - k:j + k + 1].max() and front[j] - front[max(0, j - below):j].min() >= PEAK_RISE:
+            return j
+    top = max(0, len(front) - upper)
+    return top + int(np.argmax(front[top:]))
 
 
 def _leg_pair(prof: _Profile, pieces: list[Piece]) -> list[Piece] | None:
@@ -538,55 +592,56 @@ def _knee(prof: _Profile, h: float, crotch: float, m: Measurements) -> None:
     m.knee_height = float(prof.ys[idx[i_calf + int(np.nanargmin(sub))]])
 
 
-def _shoulders(v: np.ndarray, prof: _Profile, h: float, armpit: float, m: Measurements):
+def _shoulders(v: np.ndarray, f: np.ndarray, prof: _Profile, h: float, armpit: float, m: Measurements):
     """Acromion points, a heuristic: laterally at the side walls of the torso just below the
     armpits (the torso wall runs up to the acromion; the bend of the shoulder-arm top profile
-    sits on the deltoid, a few cm further out), vertically the top of the body there."""
+    sits on the deltoid, a few cm further out), vertically the top of the body's surface there
+    (a cut by the plane x = wall, whatever the mesh's density)."""
     core = prof.central_piece(prof.cut(armpit - 0.005))
     if core is None:
+        m.notes.append("shoulder points not found: no torso cut under the armpits")
         return None
     points = []
     for x in (core.xmin, core.xmax):
-        sel = (np.abs(v[:, 0] - x) < 0.005) & (v[:, 1] >= armpit)
-        if not sel.any():
+        top = _top_at_x(v, f, x, armpit)
+        if top is None:
+            m.notes.append("shoulder points not found: no surface above the armpits at the torso's sides")
             return None
-        top = np.nonzero(sel)[0][int(np.argmax(v[sel, 1]))]
-        points.append(np.array([x, v[top, 1], v[top, 2]]))
+        points.append(top)
     left, right = points
     m.shoulder_width = float(right[0] - left[0])
     m.shoulder_height = float(0.5 * (left[1] + right[1]))
     return left, right
 
 
-def _arms(prof: _Profile, h: float, armpit: float, acromion, m: Measurements) -> None:
-    """Arm length: acromion -> elbow -> wrist, through the centres of the arm cuts. The wrist
-    is the narrowest arm cut in the lower half of the arm, above the hand."""
+def _top_at_x(v: np.ndarray, f: np.ndarray, x: float, y_min: float) -> np.ndarray | None:
+    """(3,) highest point of the surface's cut by the plane x = x that is above y_min (None
+    without one)."""
+    pieces = slice_pieces(v[:, [1, 0, 2]], f, x)  # the cut's points come back as (y, z)
+    pts = np.concatenate([p.points for p in pieces]) if pieces else np.zeros((0, 2))
+    pts = pts[pts[:, 0] >= y_min]
+    if len(pts) == 0:
+        return None
+    k = int(np.argmax(pts[:, 0]))
+    return np.array([x, pts[k, 0], pts[k, 1]])
+
+
+ARM_CUTS_MIN = 8  # an arm is measured from at least this many cuts across it
+
+
+def _arms(v: np.ndarray, f: np.ndarray, prof: _Profile, armpit: float, acromion, m: Measurements) -> None:
+    """Arm length: acromion -> elbow -> wrist, through the centres of the arm's cuts -- cuts
+    across a hanging arm by the horizontal profile, or across an arm held out (T-pose) by
+    planes x = const from the shoulder out. The wrist is the narrowest arm cut in the lower half
+    of the arm, above the hand."""
     lengths = []
     for side, a in zip((-1.0, 1.0), acromion):
-        ys, cents, widths = [], [], []
-        for i in prof.index_range(0.0, armpit - 0.005)[::-1]:  # from the armpit downwards
-            pieces, core = prof.cuts[i], prof.central[i]
-            if core is not None:
-                inner = core.xmax if side > 0 else core.xmin
-            else:
-                legs = _leg_pair(prof, pieces)
-                if legs is None:
-                    break
-                inner = legs[1].xmax if side > 0 else legs[0].xmin
-            arm = [p for p in pieces if side * ((p.xmin if side > 0 else p.xmax) - inner) > 0]
-            if not arm:
-                if ys:
-                    break
-                continue
-            w = np.array([p.length for p in arm])
-            c = (np.array([p.centroid for p in arm]) * w[:, None]).sum(axis=0) / w.sum()
-            ys.append(prof.ys[i])
-            cents.append([c[0], prof.ys[i], c[1]])
-            widths.append(hull_perimeter(np.vstack([p.points for p in arm])))
-        if len(ys) < 8:
+        cents, widths = _hanging_arm(prof, armpit, side)
+        if len(cents) < ARM_CUTS_MIN:
+            cents, widths = _held_out_arm(v, f, a, side)
+        if len(cents) < ARM_CUTS_MIN:
             continue
-        cents, widths = np.array(cents), np.array(widths)
-        n = len(ys)
+        n = len(cents)
         lo, hi = int(0.45 * n), int(0.9 * n)
         iw = lo + int(np.argmin(widths[lo:hi]))
         wrist = cents[iw]
@@ -599,4 +654,90 @@ def _arms(prof: _Profile, h: float, armpit: float, acromion, m: Measurements) ->
     if lengths:
         m.arm_length = float(np.mean(lengths))
     else:
-        m.notes.append("arm length not measured: no hanging arm found below the armpits (T-pose?)")
+        m.notes.append("arm length not measured: no arm found hanging below the armpits nor held out from the "
+                       "shoulders")
+
+
+def _arm_pieces(prof: _Profile, pieces: list[Piece], core: Piece | None, side: float) -> list[Piece]:
+    """The pieces of a cut that belong to the arm on `side` (+1: +x): on that side of the body's
+    axis (by their centre: an arm pressed into the torso overlaps it), neither the torso's piece
+    nor, below the crotch, a leg's."""
+    skip = [core] if core is not None else (_leg_pair(prof, pieces) or [])
+    return [p for p in pieces if all(p is not q for q in skip) and side * (p.centroid[0] - prof.ax) > 0]
+
+
+ARM_STEP = 0.06  # m: an arm's cut is within this of the one above it (horizontally)
+
+
+def _arm_cuts(prof: _Profile, armpit: float, side: float) -> list[tuple[int, list[Piece]]]:
+    """(cut index, the arm's pieces) from the armpit down to where the arm ends: each cut's
+    arm pieces (_arm_pieces) near the arm's centre in the cut above (ARM_STEP: a leg's cut
+    appearing beside a hanging hand at the crotch is not the arm)."""
+    out, last = [], None
+    for i in prof.index_range(0.0, armpit - 0.005)[::-1]:  # from the armpit downwards
+        arm = _arm_pieces(prof, prof.cuts[i], prof.central[i], side)
+        if last is not None:
+            arm = [p for p in arm if np.linalg.norm(p.centroid - last) < ARM_STEP]
+        if not arm:
+            if out:
+                break
+            continue
+        last = _centre(arm)
+        out.append((i, arm))
+    return out
+
+
+def _centre(pieces: list[Piece]) -> np.ndarray:
+    """(2,) the length-weighted centre of the pieces' centres."""
+    w = np.array([p.length for p in pieces])
+    return (np.array([p.centroid for p in pieces]) * w[:, None]).sum(axis=0) / w.sum()
+
+
+def _hanging_arm(prof: _Profile, armpit: float, side: float) -> tuple[np.ndarray, np.ndarray]:
+    """(centres (K, 3), hull perimeters (K,)) of the arm's horizontal cuts from the armpit down
+    to where the arm ends."""
+    cents, widths = [], []
+    for i, arm in _arm_cuts(prof, armpit, side):
+        c = _centre(arm)
+        cents.append([c[0], prof.ys[i], c[1]])
+        widths.append(hull_perimeter(np.vstack([p.points for p in arm])))
+    return np.array(cents).reshape(-1, 3), np.array(widths)
+
+
+def _hand_gap(prof: _Profile, armpit: float, waist: float) -> float:
+    """The smallest distance between the points of an arm's cut below the waist and those of
+    the other pieces of the cut (torso, legs), on either side (measure's hand_gap)."""
+    from scipy.spatial import cKDTree
+
+    gap = np.inf
+    for side in (-1.0, 1.0):
+        for i, arm in _arm_cuts(prof, armpit, side):
+            rest = [p for p in prof.cuts[i] if all(p is not q for q in arm)]
+            if prof.ys[i] > waist or not rest:
+                continue
+            d, _ = cKDTree(np.vstack([p.points for p in rest])).query(np.vstack([p.points for p in arm]))
+            gap = min(gap, float(d.min()))
+    return gap if np.isfinite(gap) else float("nan")
+
+
+def _held_out_arm(v: np.ndarray, f: np.ndarray, acromion: np.ndarray, side: float) -> tuple[np.ndarray, np.ndarray]:
+    """As _hanging_arm for an arm held out sideways: cuts by the planes x = const every STEP from
+    the acromion outwards, the pieces there above the acromion's height less 25 cm."""
+    xs = acromion[0] + side * np.arange(STEP, 1.2, STEP)
+    order = np.argsort(xs)
+    cuts: list = [None] * len(xs)
+    for k, pieces in zip(order, slice_stack(v[:, [1, 0, 2]], f, xs[order])):  # points come back as (y, z)
+        cuts[k] = pieces
+    cents, widths = [], []
+    for x, pieces in zip(xs, cuts):
+        arm = [p for p in pieces if p.centroid[0] > acromion[1] - 0.25]
+        if not arm:
+            if cents:
+                break
+            continue
+        c = _centre(arm)
+        cents.append([x, c[0], c[1]])
+        widths.append(hull_perimeter(np.vstack([p.points for p in arm])))
+    return np.array(cents).reshape(-1, 3), np.array(widths)
+
+

@@ -71,6 +71,9 @@ TOES = [f"toe{i}-1" for i in range(1, 6)]  # the joints at the ball of the foot 
 TOE_OFF, TOE_EASE = 0.64, 0.08  # gait phase of toe-off, and how long the toes take to ease back
 PELVIS_SMOOTH = 0.03  # the pelvis's path: the planted one smoothed over this x the cycle (Gaussian sigma; _pelvis_path)
 PACE_EVEN = 0.5  # how far the gait's clock is retimed toward an even pace (0: not, 1: constant speed)
+ARM_IN = 6.0  # degrees the arms hang closer to the body while walking than in the rest (A-) pose ...
+ARM_WALK_MIN = 24.0  # ... but no closer than this from the vertical (in the frontal plane): arms
+# hanging down (a scan's) are turned out to it as the walk starts, so the hands swing clear of the hips
 
 
 @dataclass
@@ -181,7 +184,7 @@ def _bump(p: float, centre: float, width: float) -> float:
     return math.exp(-0.5 * (d / width) ** 2)
 
 
-def gait_deltas(phase: float, amp: float, weight: float) -> dict[str, np.ndarray]:
+def gait_deltas(phase: float, amp: float, weight: float, arm_in: float = ARM_IN) -> dict[str, np.ndarray]:
     """Joint rotations (3x3, about the joint, in the rest pose's world axes) at gait phase
     `phase` (0..1, left heel strike at 0); amp scales the hip swing (stride), weight (0..1) the
     whole pose (the ramp from rest). X is the body's left, Y up, Z forward."""
@@ -209,7 +212,7 @@ def gait_deltas(phase: float, amp: float, weight: float) -> dict[str, np.ndarray
         # the arm swings with the opposite leg: forward when that leg is forward
         q = (p + 0.5) % 1.0
         cq = math.cos(2 * math.pi * q)
-        toward = -6.0 if side == "L" else 6.0  # closer to the body than the A-pose (about Z)
+        toward = -arm_in if side == "L" else arm_in  # closer to the body than the rest pose (about Z)
         out[f"upperarm01.{side}"] = _rot("x", -weight * 14.0 * amp * cq) @ _rot("z", weight * toward)
         out[f"lowerarm01.{side}"] = _rot("x", -weight * (-8.0 + 8.0 * cq))  # the rest pose bends it ~45
     c = math.cos(2 * math.pi * phase)
@@ -270,6 +273,20 @@ def _chain(rig: Rig):
     return cached[1]
 
 
+def arm_in(rig: Rig) -> float:
+    """Degrees the walk turns the arms in from the rest pose (ARM_IN; negative: out), so that
+    they hang no closer to the vertical than ARM_WALK_MIN: the smaller over the two upper arms
+    of (rest angle in the frontal plane - ARM_WALK_MIN), at most ARM_IN."""
+    idx = {n: i for i, n in enumerate(rig.joint_names)}
+    angles = []
+    for side in ("L", "R"):
+        if f"upperarm01.{side}" not in idx or f"lowerarm01.{side}" not in idx:
+            return ARM_IN
+        d = rig.rest_transforms[idx[f"lowerarm01.{side}"], :3, 3] - rig.rest_transforms[idx[f"upperarm01.{side}"], :3, 3]
+        angles.append(math.degrees(math.atan2(abs(d[0]), -d[1])))
+    return float(min(ARM_IN, min(angles) - ARM_WALK_MIN))
+
+
 class _Walker:
     """Poses and plants the walk for one body."""
 
@@ -297,6 +314,7 @@ class _Walker:
         self.amp = 1.0
         self.period = 1.0
         self.pace = None  # (clock, phase) tables of the retiming (even_pace); None: phase = clock
+        self.arm_in = arm_in(body.rig)
 
     def deltas(self, t: float) -> dict[str, np.ndarray]:
         """The pose at time t: during the ramp the pose weight w = smoothstep(t / ramp) grows
@@ -314,7 +332,7 @@ class _Walker:
         if self.pace is not None:
             whole = math.floor(u)
             u = whole + float(np.interp(u - whole, *self.pace))
-        d = gait_deltas((START_PHASE + u) % 1.0, self.amp, w)
+        d = gait_deltas((START_PHASE + u) % 1.0, self.amp, w, self.arm_in)
         if not self.toes:
             for name in [n for n in d if n.split(".")[0] in TOES]:
                 del d[name]

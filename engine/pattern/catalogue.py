@@ -12,11 +12,11 @@ Ease (garment girth minus body girth) after W. Aldrich, "Metric Pattern Cutting 
 Wear", 6th ed. (2015), block tables: fitted skirt waist +2, hips +4; semi-fitted dress bust
 +8, waist +6, hips +6; shirt/blouse bust +10, hips +8; trousers waist +2, hips +6.
 Which chart: the default bodies' own (default:female / default:male); any other body (a scan,
-an uploaded animation) by its waist-to-hip girth ratio, MEN_RATIO or more for the men's chart
-(the charts' own ratios at M are 0.74 and 0.86; measured: default:female 0.68, the sample scan
-0.76, default:male 0.81-0.87 by weight). A file's name does not choose it: the same scan got
-the men's chart as "anim_male.zip" and the women's as the service's "body-<id>.zip", whose
-M skirt could not be sewn around a man's waist.
+an uploaded animation) by the sex its shape reads (engine.body.sex: breasts, waist and ribcage
+against the hips; by the waist-to-hip ratio alone, 0.80 or more for men, a man with a slim
+waist got the women's chart). A file's name does not choose it: the same scan got the men's
+chart as "anim_male.zip" and the women's as the service's "body-<id>.zip", whose M skirt could
+not be sewn around a man's waist.
 Armhole (scye) depth below the shoulder: 0.12 x height for women (Aldrich's women's block,
 21 cm at 164 cm), 0.14 x height for men (his men's blocks, ~24-25 cm at 176 cm: a deeper
 armhole for the thicker arm root; 0.12 measured 22-33 % strain at the male armpit).
@@ -42,7 +42,6 @@ from engine.pattern import geometry as geo
 from engine.pattern.spec import PanelHint, PatternSpec
 
 SIZES = ("XS", "S", "M", "L", "XL", "XXL")
-MEN_RATIO = 0.80  # waist / hips at or above which a body that is not a default one gets the men's chart
 SCYE_WOMEN, SCYE_MEN = 0.12, 0.14  # armhole depth below the shoulder point, x height ...
 # ... or deeper: the armhole's underarm point at least this x Measurements.arm_root below the
 # body's armpit (thick arms). Measured: the sample scan's L sleeveless shirt (arm root 34.2 cm,
@@ -164,18 +163,30 @@ class Fit:
     # the body's lower legs: heights (cm, every cm from 2 to 30) and the hull perimeter (cm) of
     # the wider leg's cut there (trousers: how low a hem opening goes round the foot)
     ankle: tuple[np.ndarray, np.ndarray] | None = None
+    # the body's own waist girth (cm): a skirt's or trousers' waistband takes in to it where the
+    # size's is larger (waistband_girth)
+    body_waist: float | None = None
+
+
+def waistband_girth(f: Fit) -> float:
+    """The waist girth (cm, before ease) of a skirt's or trousers' waistband: the size's, or the
+    body's where that is smaller -- a waistband that holds at the waist, as a real one does by
+    its tension (taken in, elastic, or belted). A size chosen by the hips would hang loose at a
+    slimmer waist and slide down the body to where it is as wide."""
+    return min(f.waist, f.body_waist) if f.body_waist is not None and np.isfinite(f.body_waist) else f.waist
 
 
 def chart_of(body: Body, m=None) -> str:
     """'women' or 'men': the size chart for this body (module doc)."""
     if body.name.startswith("default:"):
         return "men" if body.name.split(",")[0] == "default:male" else "women"
+    from engine.body.sex import body_sex
+
     if m is None:
         from engine.body.measure import measure
 
         m = measure(body)
-    ratio = m.waist / m.hips
-    return "men" if np.isfinite(ratio) and ratio >= MEN_RATIO else "women"
+    return "men" if body_sex(body, m) == "male" else "women"
 
 
 # the body girths each garment is cut to fit (the others it does not reach, or hangs free of)
@@ -200,7 +211,8 @@ def recommend_size(name: str, body: Body, m=None) -> str:
     have = {k: 100 * getattr(m, k) for k in FIT_GIRTHS[name]}
     bad = [k for k, v in have.items() if not np.isfinite(v)]
     if bad:
-        raise InputError(f"the body's {', '.join(bad)} could not be measured, so no size can be chosen "
+        why = f" ({'; '.join(m.notes)})" if m.notes else ""
+        raise InputError(f"the body's {', '.join(bad)} could not be measured{why}, so no size can be chosen "
                          "for it: give one (--size M)")
 
     def covers(i: int, g: str) -> float:  # the largest girth g size i fits: half a step past its own
@@ -227,7 +239,8 @@ def _fit(body: Body, size: str) -> Fit:
             "crotch_height": m.crotch_height, "knee_height": m.knee_height}
     bad = [k for k, v in need.items() if not np.isfinite(v)]
     if bad:
-        raise InputError(f"the body's landmarks ({', '.join(bad)}) could not be measured; catalogue "
+        why = f" ({'; '.join(m.notes)})" if m.notes else ""
+        raise InputError(f"the body's landmarks ({', '.join(bad)}) could not be measured{why}; catalogue "
                          "garments need them to be placed (check `tryon body info`)")
     sw = m.shoulder_width if np.isfinite(m.shoulder_width) else 0.21 * m.height
     underarm = m.shoulder_height - (SCYE_MEN if chart is MEN else SCYE_WOMEN) * m.height
@@ -235,7 +248,7 @@ def _fit(body: Body, size: str) -> Fit:
         underarm = min(underarm, m.armpit_height - ARMHOLE_PER_ARM_ROOT * m.arm_root)
     fit = Fit(bust, waist, hips, 100 * m.height, 100 * m.shoulder_height, 100 * m.waist_height,
                100 * m.hip_height, 100 * m.crotch_height, 100 * m.knee_height, 100 * sw, 100 * underarm,
-               arm_joints(body), chart is MEN, _ankle_girths(body))
+               arm_joints(body), chart is MEN, _ankle_girths(body), 100 * m.waist)
     # the neckline: at least 0.045 x height each side of the centre, wider where the body's neck
     # base is (a muscular neck and trapezius), with 1 cm to spare
     nw = 0.045 * m.height
@@ -312,7 +325,7 @@ def arm_joints(body: Body) -> dict[str, np.ndarray] | None:
 
 def skirt(f: Fit) -> Made:
     """A-line skirt, two panels, from the waist to just below the knee."""
-    ww, wh = (f.waist + 2) / 4, (f.hips + 4) / 4  # half widths of one panel
+    ww, wh = (waistband_girth(f) + 2) / 4, (f.hips + 4) / 4  # half widths of one panel
     d_hip = f.waist_h - f.hip_h
     length = f.waist_h - f.knee_h + 4
     wm = wh + 0.12 * length  # hem: A-line flare
@@ -507,7 +520,7 @@ def _hem_height(f: Fit, hem: float) -> float:
 def trousers(f: Fit) -> Made:
     """Trousers, four panels (front and back of each leg), waist to the ankle, with crotch
     extensions (front 1/16, back 1/8 of the hip girth) and the legs centred on crease lines."""
-    H, W = f.hips + 6, f.waist + 2
+    H, W = f.hips + 6, waistband_girth(f) + 2
     d_hip = f.waist_h - f.hip_h
     d_cr = f.waist_h - f.crotch_h + 2  # crotch point 2 cm below the body's
     d_hip = min(d_hip, d_cr - 6)

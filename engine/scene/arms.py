@@ -176,3 +176,48 @@ def lower_arms(lift: ArmLift, res: DrapeResult, request: TryOnOptions, tuning: T
                   lowering={"strain_max": float(w["strain_max"]), "penetration_mm": w["penetration_mm"],
                             "frames": int(w["frames"])})
     return out
+
+
+HAND_NEAR = 0.012  # m: hands closer than this to the hips or thighs (measure's hand_gap) ...
+HAND_CLEAR = 0.02  # m: ... are moved out until this far, turning the arms about the shoulders (as far
+# as the default bodies' A-pose hands hang from the hips: further out a hand nears the hip's flare)
+HAND_STEP = 2.0  # degrees a step
+HAND_MAX = 30.0  # degrees at most
+
+
+def clear_hands(body: Body) -> Body:
+    """The body to dress and walk: as given, or -- where its hands touch or nearly touch its hips
+    or thighs (a scan with its arms down) -- with the arms turned out about the shoulders
+    (the default skeleton fitted to it) until the hands hang HAND_CLEAR away, rigged in that
+    pose and saying so in its notes. There is no room for cloth between a hand and a thigh that
+    touch: trousers placed round the legs take the hands in, and a walk swings the hands into
+    the thighs. Returns the body unchanged when it cannot be fitted."""
+    from engine.body.measure import measure
+    from engine.body.motion import _rot, pose_joints
+    from engine.body.types import Rig
+    from engine.scene.walk import walking_body
+
+    gap = measure(body).hand_gap
+    if not gap < HAND_NEAR:
+        return body
+    try:
+        rigged = walking_body(body)
+    except (InputError, ValueError, np.linalg.LinAlgError):
+        return body
+    rig = rigged.rig
+    if not {"upperarm01.L", "upperarm01.R"} <= set(rig.joint_names):
+        return body
+    deg, got, v = 0.0, gap, rigged.vertices
+    while got < HAND_CLEAR and deg < HAND_MAX:
+        deg += HAND_STEP
+        v = _pose(rigged, deg)
+        got = measure(Body(vertices=v, faces=rigged.faces)).hand_gap
+        got = np.inf if not np.isfinite(got) else got
+    g = pose_joints(rig, {"upperarm01.L": _rot("z", deg), "upperarm01.R": _rot("z", -deg)})
+    posed = Rig(joint_names=list(rig.joint_names), parents=rig.parents, rest_transforms=g,
+                skin_indices=rig.skin_indices, skin_weights=rig.skin_weights)
+    note = (f"the arms were turned {deg:.0f} degrees out from the body for dressing and walking: the hands "
+            f"{'touched' if gap < 0.002 else 'nearly touched'} the hips or thighs ({100 * gap:.1f} cm), "
+            f"and hang {100 * min(got, 1.0):.1f} cm away now")
+    return Body(vertices=v, faces=rigged.faces, name=body.name, segments=rigged.segments, rig=posed,
+                notes=list(rigged.notes) + [note], to_world=body.to_world)

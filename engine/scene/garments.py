@@ -48,8 +48,8 @@ def dxf_garment(path: Path, body: Body, size: str | None, units: str | None = No
     return imp.spec, _roles_placement(imp.spec, body), f"{path.name} (size {imp.size}{how})"
 
 
-def dxf_sizes(path: Path, body: Body, units: str | None = None) -> list[str]:
-    """--size auto on a DXF: the recommended size and the larger ones after it."""
+def dxf_sizes(path: Path, body: Body, units: str | None = None) -> tuple[list[str], int]:
+    """--size auto on a DXF: (its sizes, the index of the one its girths recommend)."""
     from engine.body.measure import measure
     from engine.pattern.dxf_read import read_pattern
     from engine.pattern.dxf_size import recommend_size
@@ -57,7 +57,7 @@ def dxf_sizes(path: Path, body: Body, units: str | None = None) -> list[str]:
     pattern = read_pattern(path, units)
     m = measure(body)
     first, _ = recommend_size(pattern, {"chest": 100 * m.bust, "hips": 100 * m.hips})
-    return pattern.sizes[pattern.sizes.index(first):]
+    return list(pattern.sizes), pattern.sizes.index(first)
 
 
 def resolve_garment(arg: str, body: Body, size: str | None = "M", units: str | None = None,
@@ -162,10 +162,11 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None, dxf:
     With --size auto on a catalogue garment, the size recommended from the body's girths comes
     first; if it comes out too small -- its drape refused it (seams that cannot close, cloth
     stretched past DrapeTuning.too_tight) or ended tight (report["tight"]) -- the next larger
-    size is dressed, up to AUTO_TRIES more (a chart does not know a fuller bust). The report's `sizes_tried` lists the
-    sizes found too small and why; `note(size, why, next size)` is called before each retry.
-    When every size tried is too small, the least stretched tight result is returned (its
-    warnings say so), or the last refusal raised. Other sizes and pattern files are dressed
+    size is dressed, up to AUTO_TRIES more (a chart does not know a fuller bust); if it comes out
+    too large (slid down the body), the next smaller (_dress_auto). The report's `sizes_tried`
+    lists the sizes that did not fit and why; `note(size, why, next size)` is called before each
+    retry. When no size fits, the closest result is returned with a warning naming each size
+    tried and why, or the last refusal raised. Other sizes and pattern files are dressed
     once; a too-small error then names the size auto would pick (add_size_hint). Seams beside
     the arms that cannot close on a body whose arms hang close to its torso, or cloth beside
     them left too stretched (arms_in_the_way, beside_the_arms): the same size is dressed again
@@ -173,8 +174,7 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None, dxf:
     and so are the larger sizes --size auto goes on to; if the arms cannot be raised, the
     try-on ends with that reason, in any size."""
     from engine.errors import SimulationError
-    from engine.garment.catalogue import make_garment
-    from engine.pattern.catalogue import AUTO, CATALOGUE, SIZES, recommend_size
+    from engine.pattern.catalogue import AUTO, CATALOGUE
 
     lifted = []  # the ArmLift, once the arms were found in the way
 
@@ -228,40 +228,79 @@ def dress_in_size(arg: str, body: Body, size: str | None, dress, note=None, dxf:
         except SimulationError as e:
             add_size_hint(e, arg, body, size)  # (only a too-small error; not the arms in the way)
             raise
-    if is_dxf(arg):  # the pattern's own sizes from the one its girths recommend
-        sizes = dxf_sizes(Path(arg), body, dxf.get("units"))[:1 + AUTO_TRIES]
+    return _dress_auto(arg, body, attempt, note, dxf)
+
+
+def _verdict(report: dict) -> str:
+    """'fits', 'small' (ended tight) or 'large' (slid down the body) for a drape that ended."""
+    if report.get("tight"):
+        return "small"
+    if any(w.startswith("the garment slid") for w in report.get("warnings", [])):
+        return "large"
+    return "fits"
+
+
+def _auto_sizes(arg: str, body: Body, dxf: dict):
+    """(the garment's sizes, smallest first; the index of the one the body's girths choose;
+    make(arg, body, size) -> (spec, placement, name)): a DXF's own sizes, else the catalogue's."""
+    from engine.garment.catalogue import make_garment
+    from engine.pattern.catalogue import SIZES, recommend_size
+
+    if is_dxf(arg):
+        sizes, first = dxf_sizes(Path(arg), body, dxf.get("units"))
 
         def make(arg, b, s):
-            return dxf_garment(arg, b, s, **dxf)
-    else:
-        first = SIZES.index(recommend_size(arg, body))
-        sizes = SIZES[first:first + 1 + AUTO_TRIES]
-        make = make_garment
+            return dxf_garment(Path(arg), b, s, **dxf)
+        return sizes, first, make
+    return list(SIZES), SIZES.index(recommend_size(arg, body)), make_garment
+
+
+def _dress_auto(arg: str, body: Body, attempt, note=None, dxf: dict | None = None):
+    """--size auto (dress_in_size): from the size the body's girths choose, one size larger while
+    it comes out too small (refused, or tight) -- up to AUTO_TRIES larger --, one smaller while it
+    comes out too large (slid down the body, or slid off it), never a size twice. A size that
+    fits is returned; when none does, the drape that came closest (a tight one before one that
+    slid) with a warning naming every size tried and why, or the last refusal raised."""
+    from engine.errors import SimulationError
+
+    sizes, first, make = _auto_sizes(arg, body, dxf or {})
+    i = first
     tried: list[dict] = []
-    tight = None  # the least stretched tight result so far: (result, report, size)
-    for k, s in enumerate(sizes):
+    ended: dict[str, tuple] = {}  # size -> (result, report, verdict, size) of drapes that ended
+    error = None
+    while True:
+        s = sizes[i]
         how = "chosen from the body's girths" if not tried else \
-            f"chosen by draping: {', '.join(t['size'] for t in tried)} too small"
+            f"chosen by draping: {', '.join(t['size'] + ' too ' + t['verdict'] for t in tried)}"
         try:
             res, report = attempt(lambda b: make(arg, b, s), lambda name: name[:-1] + f", {how})")
         except SimulationError as e:
-            if not getattr(e, "too_small", False):
+            verdict = {(True, False): "small", (False, True): "large"}.get(
+                (getattr(e, "too_small", False), getattr(e, "too_large", False)))
+            if verdict is None:
                 raise
-            if k == len(sizes) - 1 and tight is None:
-                e.args = (f"{e} (--size auto tried {', '.join([t['size'] for t in tried] + [s])})",) \
-                    + tuple(e.args[1:])
-                raise
-            why = str(e)
+            why, error = str(e), e
         else:
+            verdict = _verdict(report)
             report["sizes_tried"] = list(tried)
-            if not report.get("tight"):
+            if verdict == "fits":
                 return res, report
-            why = f"tight: stretched {100 * report['strain']['max']:.0f} %"
-            if tight is None or report["strain"]["max"] < tight[1]["strain"]["max"]:
-                tight = (res, report, s)
-        tried.append({"size": s, "error": why})
-        if k < len(sizes) - 1 and note is not None:
-            note(s, why, sizes[k + 1])
-    res, report, s = tight
+            ended[s] = (res, report, verdict, s)
+            why = (f"tight: stretched {100 * report['strain']['max']:.0f} %" if verdict == "small" else
+                   next(w for w in report["warnings"] if w.startswith("the garment slid")))
+        tried.append({"size": s, "verdict": verdict, "error": why})
+        nxt = i + 1 if verdict == "small" else i - 1
+        if not 0 <= nxt < len(sizes) or sizes[nxt] in {t["size"] for t in tried} or nxt > first + AUTO_TRIES:
+            break
+        if note is not None:
+            note(s, why, sizes[nxt])
+        i = nxt
+    summary = "; ".join(f"{t['size']} too {t['verdict']} ({t['error']})" for t in tried)
+    if not ended:
+        error.args = (f"{error} (--size auto tried {', '.join(t['size'] for t in tried)})",) + tuple(error.args[1:])
+        raise error
+    tight = [v for v in ended.values() if v[2] == "small"]
+    res, report, _, s = min(tight, key=lambda v: v[1]["strain"]["max"]) if tight else list(ended.values())[-1]
     report["sizes_tried"] = [t for t in tried if t["size"] != s]
+    report.setdefault("warnings", []).append(f"no size fits this body well: {summary}")
     return res, report

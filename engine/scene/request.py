@@ -113,11 +113,12 @@ class TryOnRequest(TryOnOptions):
                          "GarmentCode JSON file, or a DXF cutting pattern (.dxf: its seams and placement "
                          "inferred, see `tryon pattern import`) (the service: the id of an uploaded pattern)")
     size: str | None = Field(None, description="catalogue size XS, S, M, L, XL, XXL (default M), on the women's or "
-                             "men's chart (a default body's own, any other body's by its waist-to-hip ratio); a "
+                             "men's chart (a default body's own, any other body's by the sex its shape reads); a "
                              "DXF pattern's own size names (default: its sample size); or auto: the smallest size "
                              "whose girths cover the body's (catalogue: the chart's; DXF: the pieces' chest or hip "
-                             "width, with ease), and if that drapes too small, the next larger, up to two more. "
-                             "Not for GarmentCode patterns")
+                             "width, with ease), then by draping: the next larger while it comes out too small "
+                             "(refused, or tight), up to two more, the next smaller while it slides down the body; "
+                             "when none fits, the report says so. Not for GarmentCode patterns")
     assembly: str | None = Field(None, description="with a DXF pattern: an assembly file (JSON) to use instead of "
                                  "the inferred seams -- the assembly.json `tryon pattern import` writes, corrected "
                                  "(it serves every size), or GarmentCode's kind (the service: upload it with the DXF)")

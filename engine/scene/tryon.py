@@ -223,6 +223,7 @@ def _slid(body: Body, res: DrapeResult, shift: dict, placement_note: str | None)
         "it is too large for this body, or its seams did not close around it; try a smaller size, or "
         "check the pattern's panels")
     err.positions, err.triangles = res.positions.copy(), res.triangles  # for a picture
+    err.too_large = True  # (engine.scene.garments: --size auto tries a smaller one)
     _carried_hint(err, placement_note, body, slid=True)
     return err
 

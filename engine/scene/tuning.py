@@ -76,6 +76,9 @@ class WalkTuning:
     """Walking: the dressed body walks, the cloth follows."""
 
     stiffen_at: float | None = 0.10  # a frame past the fabric's threshold + this doubles the springs (None: never)
+    # ... over at least this many springs (or three times as far past it at one): one spring at a seam's
+    # end is no reason to stiffen every spring for the rest of the walk (a shorter eq. 4 step)
+    stiffen_springs: int = 8
     damping_cap: float = 0.5  # a spring's damping is at most this x m / (dt degree)
     check_travel: float = 0.00175  # m: collisions are checked as often as the body's bulk travels this far ...
     max_check_every: int = 8  # ... at least every this many steps
@@ -89,6 +92,8 @@ class WalkTuning:
         if self.stiffen_at is not None and not (0.0 < self.stiffen_at <= 0.4):
             raise InputError(f"stiffen_at {self.stiffen_at}: use 0 .. 0.4 (strain past the fabric's threshold), "
                              "or None")
+        if not (1 <= self.stiffen_springs <= 10_000):
+            raise InputError(f"stiffen_springs {self.stiffen_springs}: use 1 .. 10000 springs")
         if not (0.0 < self.damping_cap <= 1.0):
             raise InputError(f"damping_cap {self.damping_cap}: use 0 .. 1 (x m / (dt degree))")
         if not (0.0 <= self.friction <= 2.0):

@@ -14,7 +14,8 @@ v_dir = g dt + v_object (eq. 6 and §3.2's two rules) can be chosen, but is not 
 Softer springs while walking (TryOnOptions.walk_stiffness, default 0.25 x the drape's stretch and
 shear springs): the eq. 4 step grows as 1 / sqrt of it, and the strain limit (velocity
 modification, the strain guard) holds the fit, as in seed 003 §4. Where it cannot -- a band the
-moving body wedges -- a frame whose strain max passes the fabric's threshold + WalkTuning.stiffen_at
+moving body wedges -- a frame whose strain passes the fabric's threshold + WalkTuning.stiffen_at
+over at least WalkTuning.stiffen_springs springs (spread_strain), or three times that at one,
 doubles the stiffness (up to the drape's) for the rest of the walk and the report says so.
 
 A periodic walk's maps (the ramp and one cycle) are rendered before the walking stage
@@ -165,14 +166,18 @@ def walk_cloth(body: Body, drape: DrapeResult, request: TryOnOptions = TryOnOpti
             x = state.x
             strain = _check_frame(solver, state, i, track, lo, hi)
             frames[i] = x
-            if strain > stiffen_strain and stiffness < 1.0:  # the strain limit is losing: stiffer springs
+            # the strain limit is losing over a region, or badly at one spring: stiffer springs
+            spread = spread_strain(model, x, t.stiffen_springs) if strain > stiffen_strain else 0.0
+            if (spread > stiffen_strain or strain > stiffen_strain + 2 * t.stiffen_at) and stiffness < 1.0:
                 stiffness = min(1.0, 2.0 * stiffness)
                 model, sub, dt, every = walking_model(stiffness)
                 solver.restiffen(model, dt)
                 control.collide_every = every
                 stiffened.append({"frame": i, "strain": strain, "stiffness": stiffness})
+                why = (f"{t.stiffen_springs} springs reached {100 * spread:.1f} %" if spread > stiffen_strain else
+                       f"a spring reached {100 * strain:.1f} %")
                 left.append(f"the softer walking springs from frame {i} on ({stiffness:g} x the drape's now), "
-                            f"because a spring reached {100 * strain:.1f} % strain")
+                            f"because {why} strain")
             strains.append(strain)
             progress("walking", i / n_frames, f"frame {i}/{n_frames}, strain {100 * strain:.1f} %")
             if observer is not None:  # a viewer follows the walker: both relative to the root
@@ -262,6 +267,16 @@ def _walk_collider(body: Body, drape: DrapeResult, track: BodyTrack, request: Tr
     return TrackCollider(track, renderer, tol=tol, keep=keep), renderer
 
 
+def spread_strain(model, x: np.ndarray, n: int) -> float:
+    """The strain of the n-th most stretched of the model's strain-limited springs at positions x."""
+    s = model.springs[model.strain_limited]
+    if len(s) == 0:
+        return 0.0
+    strain = np.linalg.norm(x[s[:, 1]] - x[s[:, 0]], axis=1) / model.rest[model.strain_limited] - 1.0
+    n = min(n, len(strain))
+    return float(np.partition(strain, len(strain) - n)[len(strain) - n])
+
+
 def _check_frame(solver: ClothSolver, state: ClothState, i: int, track: BodyTrack, lo: np.ndarray,
                  hi: np.ndarray) -> float:
     """The frame's strain max; SimulationError when the cloth became unstable or came apart."""
@@ -334,26 +349,33 @@ def write_walk_outputs(out, body: Body, walk: WalkResult, report: dict, panels: 
 
     from engine.io.anim import write_anim_glb
     from engine.io.export import BODY_RGBA, GARMENT_RGBA
-    from engine.io.render import BODY_RGB, render_meshes
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tr, gf = walk.track, walk.garment_frames
-    n = len(gf)
-    body_frames = np.stack([tr.vertices(i).astype(np.float32) for i in range(n)])
+    body_frames = np.stack([tr.vertices(i).astype(np.float32) for i in range(len(gf))])
     paths = [write_anim_glb(out / "anim.glb", [("body", body.faces, body_frames, BODY_RGBA),
                                               ("garment", walk.triangles, gf, GARMENT_RGBA)], fps=tr.fps)]
-    picks = np.unique(np.linspace(0, n - 1, panels).round().astype(int))
-    imgs = []
-    for i in picks:
-        off = np.array([0.0, 0.0, tr.offset(int(i))[2]])  # each panel centred on the walker
-        imgs.append(render_meshes([(body_frames[i] - off, body.faces, BODY_RGB),
-                                   (gf[i] - off, walk.triangles, (0.27, 0.43, 0.75))], size=size, view="side"))
-    h = min(im.shape[0] for im in imgs)
     p = out / "strip.png"
-    Image.fromarray(np.concatenate([im[:h] for im in imgs], axis=1)).save(p)
+    Image.fromarray(walk_strip(body, walk, panels, size)).save(p)
     paths.append(p)
     p = out / "report.json"
     p.write_text(json.dumps(report, indent=2))
     paths.append(p)
     return paths
+
+
+def walk_strip(body: Body, walk: WalkResult, panels: int = 8, size: int = 420) -> np.ndarray:
+    """(size, W, 3) uint8: side views of `panels` frames across the walk, each centred on the
+    walker, side by side."""
+    from engine.io.render import BODY_RGB, render_meshes
+
+    tr, gf = walk.track, walk.garment_frames
+    picks = np.unique(np.linspace(0, len(gf) - 1, panels).round().astype(int))
+    imgs = []
+    for i in picks:
+        off = np.array([0.0, 0.0, tr.offset(int(i))[2]])  # each panel centred on the walker
+        imgs.append(render_meshes([(tr.vertices(int(i)) - off, body.faces, BODY_RGB),
+                                   (gf[i] - off, walk.triangles, (0.27, 0.43, 0.75))], size=size, view="side"))
+    h = min(im.shape[0] for im in imgs)
+    return np.concatenate([im[:h] for im in imgs], axis=1)
