@@ -2,7 +2,8 @@
 
 Draws N designs with ../shared/garmentcode/sample_designs.py (seeded: the same --seed gives the same
 designs), drapes each on the body, and prints a table: the designs, how many drape (settled; every
-seam closed; penetration max <= 2 mm and p99 <= 0.5 mm; strain <= the fabric's threshold + 1 %),
+seam closed; penetration max <= 2 mm and p99 <= 0.5 mm; strain <= the fabric's threshold + 1 %; no
+warning that it slid down the body or bunched up),
 the failures grouped by reason, the median and 90th-percentile wall time per garment, and the worst
 penetration, strain and sharp folds. Writes results.json and contact_sheet.png (a front view of
 every drape, its name and result under it) to --out.
@@ -51,6 +52,11 @@ def verdict(rep: dict) -> str | None:
         return "penetration past the bars"
     if rep["strain"]["max"] > rep["strain"]["threshold"] + STRAIN_OVER:
         return "strain past threshold + 1 %"
+    for w in rep["warnings"]:  # a drape that ends with good numbers but off where it was put looks wrong
+        if w.startswith("the garment slid"):
+            return "slid down the body (a warning)"
+        if "bunched up" in w:
+            return "bunched up (a warning)"
     return None
 
 
