@@ -6,7 +6,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 APT_PKGS=(libosmesa6 libegl1 libegl-mesa0 libgl1-mesa-dri libopengl0 libgbm1 libglx-mesa0
-          chromium)  # chromium: the browser test (Playwright drives Debian's, never downloads one)
+          chromium libcairo2)  # chromium: the browser test (Playwright drives Debian's, never downloads one);
+          # libcairo2: GarmentCode's design sampler (its benchmark and tests) draws through cairosvg
 missing=()
 for p in "${APT_PKGS[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

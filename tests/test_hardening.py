@@ -125,6 +125,13 @@ def test_validation_is_near_linear_in_edges():
     check(parse_pattern(json.dumps(doc), source="big.json"), source="big.json")
     assert time.perf_counter() - t0 < 3.0
     verts[10], verts[4000] = verts[4000], verts[10]  # two far vertices swapped: the outline crosses itself
+    t0 = time.perf_counter()  # a few crossings: found, named, a warning (GarmentCode draws such outlines)
+    warned = [p for p in check(parse_pattern(json.dumps(doc), source="x.json"), source="x.json")
+              if "crosses itself" in p.message]
+    assert time.perf_counter() - t0 < 3.0
+    assert len(warned) == 1 and warned[0].edge == 9, warned
+    for k in range(100, 3900, 200):  # nineteen pairs of near vertices swapped: a crossing each, a mix-up
+        verts[k], verts[k + 2] = verts[k + 2], verts[k]
     _refused(check, parse_pattern(json.dumps(doc), source="x.json"), "x.json", words="crosses itself", seconds=3.0)
 
 

@@ -152,6 +152,8 @@ def segment_crossings(poly: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     m = len(poly)
     a, b = poly, np.roll(poly, -1, axis=0)
     i, j = _grid_pairs(a, b)
+    ij = np.unique(i.astype(np.int64) * m + j)  # a pair whose boxes share several cells once
+    i, j = ij // m, ij % m
     keep = (j - i >= 2) & ~((i == 0) & (j == m - 1))  # neighbours share a vertex
     i, j = i[keep], j[keep]
 
@@ -162,8 +164,14 @@ def segment_crossings(poly: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     o2 = orient(a[i], b[i], b[j])
     o3 = orient(a[j], b[j], a[i])
     o4 = orient(a[j], b[j], b[i])
-    eps = 1e-14 * (1 + np.abs(b - a).max()) ** 2
-    hit = (o1 * o2 < -eps) & (o3 * o4 < -eps)
+    # each orientation compared with a tolerance in the outline's own units squared (their product
+    # against one missed the crossings of millimetre segments in metres)
+    eps = 1e-12 * float(np.ptp(poly, axis=0).max()) ** 2
+
+    def opposite(p, q):
+        return ((p > eps) & (q < -eps)) | ((p < -eps) & (q > eps))
+
+    hit = opposite(o1, o2) & opposite(o3, o4)
     i, j = i[hit], j[hit]
     t = o3[hit] / (o3[hit] - o4[hit])  # (orient of segment j's line at a[i] and b[i])
     return i, j, t

@@ -44,7 +44,7 @@ def attachment(garment: Garment, body: Body) -> tuple[Attachment | None, str | N
 
     for label in ("lower_interface", "strapless_top"):
         v = garment.labelled.get(label)
-        if v is not None and len(v):
+        if v is not None and len(v) and _round_body(body, x[v]):
             hold(label, v, x[v] - [0.0, SLACK, 0.0], (0.0, 1.0, 0.0), "from sliding down")
     collar = [lb for lb in ("right_collar", "left_collar") if len(garment.labelled.get(lb, ()))]
     if collar:
@@ -66,6 +66,19 @@ def attachment(garment: Garment, body: Body) -> tuple[Attachment | None, str | N
                      normals=np.concatenate(normals).astype(np.float64), tau=np.concatenate(tau),
                      vmax=np.concatenate(vmax))
     return att, f"kept {', '.join(said)} while sewn and draped, as GarmentCode's simulator holds them"
+
+
+def _round_body(body: Body, p: np.ndarray) -> bool:
+    """Whether the held edge's middle lies within the body's horizontal extent at its height: a
+    waist tie holds on a body, not on the air beside it (a pattern placed away from the body is
+    let fall, and said so, rather than hung where it was put)."""
+    y = float(p[:, 1].mean())
+    near = body.vertices[np.abs(body.vertices[:, 1] - y) < 0.05]
+    if not len(near):
+        return False
+    mid = p[:, [0, 2]].mean(axis=0)
+    lo, hi = near[:, [0, 2]].min(axis=0), near[:, [0, 2]].max(axis=0)
+    return bool(np.all(mid >= lo) and np.all(mid <= hi))
 
 
 def welded(att: Attachment | None, vertex_map: np.ndarray) -> Attachment | None:
