@@ -134,77 +134,96 @@ def _nearest_on_triangle(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
 
 
 @serial_kernel
-def find_contacts(x, xp, tris, packed, inv_c, start, entries, near_ptr, near, thickness,
-                  c_v, c_t, c_w, c_n, c_d, mark):
-    """The vertex-triangle pairs closer than `thickness` now (x) or predicted (xp), the pairs of
-    rest neighbours left out: vertex c_v, triangle corners c_t, the weights of the triangle's point
-    nearest the vertex c_w, the unit normal c_n from that point to the vertex now (the side the
-    vertex is on), the distance now c_d. Triangle boxes (over x and xp, grown by thickness) hashed
-    by fill_hash. Returns how many pairs it found; past len(c_v) they are counted, not kept.
-    mark (N,) int32: scratch (mark[q] == p: q is p or one of its rest neighbours)."""
+def find_near(x, tris, packed, inv_c, start, entries, near_ptr, near, reach, c_v, c_t, mark, tmark):
+    """The candidate pairs: every vertex c_v and triangle (corners c_t) closer than `reach`, the
+    vertex's rest neighbours' triangles left out. Triangle boxes of x grown by reach, hashed by
+    fill_hash. Returns how many pairs it found; past len(c_v) they are counted, not kept.
+    mark (N,), tmark (F,) int32: scratch (mark[q] == p: q is p or one of its rest neighbours;
+    tmark[t] == p: t already met, in a bucket two of its cells share)."""
     mask = start.shape[0] - 2
     m = 0
+    r2 = reach * reach
     for q in range(x.shape[0]):
         mark[q] = -1
+    for t in range(tris.shape[0]):
+        tmark[t] = -1
     for p in range(x.shape[0]):
         mark[p] = p
         for k in range(near_ptr[p], near_ptr[p + 1]):
             mark[near[k]] = p
         px, py, pz = x[p, 0], x[p, 1], x[p, 2]
-        qx, qy, qz = xp[p, 0], xp[p, 1], xp[p, 2]
-        l0, l1, l2 = min(px, qx), min(py, qy), min(pz, qz)
-        h0, h1, h2 = max(px, qx), max(py, qy), max(pz, qz)
-        if _too_wide(l0, l1, l2, h0, h1, h2, inv_c):
+        k = _key(_cell(px, inv_c), _cell(py, inv_c), _cell(pz, inv_c), mask)
+        for e in range(start[k], start[k + 1]):
+            if (packed[e, 0] > px or packed[e, 3] < px or packed[e, 1] > py or packed[e, 4] < py
+                    or packed[e, 2] > pz or packed[e, 5] < pz):
+                continue
+            t = entries[e]
+            a, b, c = tris[t, 0], tris[t, 1], tris[t, 2]
+            if mark[a] == p or mark[b] == p or mark[c] == p or tmark[t] == p:  # p's own, a rest neighbour's, met
+                continue
+            tmark[t] = p
+            d2, wa, wb, wc = _nearest_on_triangle(px, py, pz, x[a, 0], x[a, 1], x[a, 2], x[b, 0], x[b, 1], x[b, 2],
+                                                  x[c, 0], x[c, 1], x[c, 2])
+            if d2 >= r2:
+                continue
+            if m < c_v.shape[0]:
+                c_v[m] = p
+                c_t[m, 0], c_t[m, 1], c_t[m, 2] = a, b, c
+            m += 1
+    return m
+
+
+@serial_kernel
+def moved_past(x, xp, x0, limit):
+    """Whether any vertex now (x) or predicted (xp) is farther than `limit` from x0."""
+    l2 = limit * limit
+    for i in range(x.shape[0]):
+        d1 = (x[i, 0] - x0[i, 0]) ** 2 + (x[i, 1] - x0[i, 1]) ** 2 + (x[i, 2] - x0[i, 2]) ** 2
+        d2 = (xp[i, 0] - x0[i, 0]) ** 2 + (xp[i, 1] - x0[i, 1]) ** 2 + (xp[i, 2] - x0[i, 2]) ** 2
+        if d1 > l2 or d2 > l2:
+            return True
+    return False
+
+
+@serial_kernel
+def find_contacts(x, xp, cand_v, cand_t, n_cand, thickness, c_v, c_t, c_w, c_n, c_d):
+    """Of the candidate pairs (find_near), those closer than `thickness` now (x) or predicted
+    (xp): vertex c_v, triangle corners c_t, the weights of the triangle's point nearest the vertex
+    c_w, the unit normal c_n from that point to the vertex now (the side the vertex is on), the
+    distance now c_d. Returns how many (the arrays hold n_cand)."""
+    m = 0
+    for k in range(n_cand):
+        p, a, b, c = cand_v[k], cand_t[k, 0], cand_t[k, 1], cand_t[k, 2]
+        px, py, pz = x[p, 0], x[p, 1], x[p, 2]
+        d2, wa, wb, wc = _nearest_on_triangle(px, py, pz, x[a, 0], x[a, 1], x[a, 2], x[b, 0], x[b, 1], x[b, 2],
+                                              x[c, 0], x[c, 1], x[c, 2])
+        d = np.sqrt(d2)
+        sx = wa * x[a, 0] + wb * x[b, 0] + wc * x[c, 0]
+        sy = wa * x[a, 1] + wb * x[b, 1] + wc * x[c, 1]
+        sz = wa * x[a, 2] + wb * x[b, 2] + wc * x[c, 2]
+        if d > 1e-9:
+            nx, ny, nz = (px - sx) / d, (py - sy) / d, (pz - sz) / d
+        else:  # on the triangle: its normal, toward where the vertex is going
+            e1x, e1y, e1z = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
+            e2x, e2y, e2z = x[c, 0] - x[a, 0], x[c, 1] - x[a, 1], x[c, 2] - x[a, 2]
+            nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+            nl = np.sqrt(nx * nx + ny * ny + nz * nz)
+            if nl < 1e-30:
+                continue
+            sgn = 1.0 if (xp[p, 0] - px) * nx + (xp[p, 1] - py) * ny + (xp[p, 2] - pz) * nz >= 0.0 else -1.0
+            nx, ny, nz = sgn * nx / nl, sgn * ny / nl, sgn * nz / nl
+        # the gap at the next check, along the normal of now
+        gx = xp[p, 0] - (wa * xp[a, 0] + wb * xp[b, 0] + wc * xp[c, 0])
+        gy = xp[p, 1] - (wa * xp[a, 1] + wb * xp[b, 1] + wc * xp[c, 1])
+        gz = xp[p, 2] - (wa * xp[a, 2] + wb * xp[b, 2] + wc * xp[c, 2])
+        if d >= thickness and gx * nx + gy * ny + gz * nz >= thickness:
             continue
-        single = (_cell(l0, inv_c) == _cell(h0, inv_c) and _cell(l1, inv_c) == _cell(h1, inv_c)
-                  and _cell(l2, inv_c) == _cell(h2, inv_c))
-        for ix in range(_cell(l0, inv_c), _cell(h0, inv_c) + 1):
-            for iy in range(_cell(l1, inv_c), _cell(h1, inv_c) + 1):
-                for iz in range(_cell(l2, inv_c), _cell(h2, inv_c) + 1):
-                    k = _key(ix, iy, iz, mask)
-                    for e in range(start[k], start[k + 1]):
-                        if (packed[e, 0] > h0 or packed[e, 3] < l0 or packed[e, 1] > h1 or packed[e, 4] < l1
-                                or packed[e, 2] > h2 or packed[e, 5] < l2):
-                            continue
-                        # each pair once: in the cell of its boxes' overlap's low corner
-                        if not single and (_cell(max(packed[e, 0], l0), inv_c) != ix
-                                           or _cell(max(packed[e, 1], l1), inv_c) != iy
-                                           or _cell(max(packed[e, 2], l2), inv_c) != iz):
-                            continue
-                        t = entries[e]
-                        a, b, c = tris[t, 0], tris[t, 1], tris[t, 2]
-                        if mark[a] == p or mark[b] == p or mark[c] == p:  # p's own or a rest neighbour's
-                            continue
-                        d2, wa, wb, wc = _nearest_on_triangle(px, py, pz, x[a, 0], x[a, 1], x[a, 2], x[b, 0],
-                                                              x[b, 1], x[b, 2], x[c, 0], x[c, 1], x[c, 2])
-                        d = np.sqrt(d2)
-                        sx = wa * x[a, 0] + wb * x[b, 0] + wc * x[c, 0]
-                        sy = wa * x[a, 1] + wb * x[b, 1] + wc * x[c, 1]
-                        sz = wa * x[a, 2] + wb * x[b, 2] + wc * x[c, 2]
-                        if d > 1e-9:
-                            nx, ny, nz = (px - sx) / d, (py - sy) / d, (pz - sz) / d
-                        else:  # on the triangle: its normal, toward where the vertex is going
-                            e1x, e1y, e1z = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
-                            e2x, e2y, e2z = x[c, 0] - x[a, 0], x[c, 1] - x[a, 1], x[c, 2] - x[a, 2]
-                            nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
-                            nl = np.sqrt(nx * nx + ny * ny + nz * nz)
-                            if nl < 1e-30:
-                                continue
-                            sgn = 1.0 if (qx - px) * nx + (qy - py) * ny + (qz - pz) * nz >= 0.0 else -1.0
-                            nx, ny, nz = sgn * nx / nl, sgn * ny / nl, sgn * nz / nl
-                        # the gap at the next check, along the normal of now
-                        gx = qx - (wa * xp[a, 0] + wb * xp[b, 0] + wc * xp[c, 0])
-                        gy = qy - (wa * xp[a, 1] + wb * xp[b, 1] + wc * xp[c, 1])
-                        gz = qz - (wa * xp[a, 2] + wb * xp[b, 2] + wc * xp[c, 2])
-                        if d >= thickness and gx * nx + gy * ny + gz * nz >= thickness:
-                            continue
-                        if m < c_v.shape[0]:
-                            c_v[m] = p
-                            c_t[m, 0], c_t[m, 1], c_t[m, 2] = a, b, c
-                            c_w[m, 0], c_w[m, 1], c_w[m, 2] = wa, wb, wc
-                            c_n[m, 0], c_n[m, 1], c_n[m, 2] = nx, ny, nz
-                            c_d[m] = d
-                        m += 1
+        c_v[m] = p
+        c_t[m, 0], c_t[m, 1], c_t[m, 2] = a, b, c
+        c_w[m, 0], c_w[m, 1], c_w[m, 2] = wa, wb, wc
+        c_n[m, 0], c_n[m, 1], c_n[m, 2] = nx, ny, nz
+        c_d[m] = d
+        m += 1
     return m
 
 

@@ -1,8 +1,9 @@
 """Cloth-cloth contact within one cloth (a cuff over its sleeve, a skirt level over the next, a
 collar on the neckline): every few steps the vertex-triangle pairs closer than the cloth's
 thickness -- now, or at the next check with the points predicted ahead as the body check predicts
-them -- are found with a spatial hash and pushed apart by proximity impulses
-(engine.cloth.kernels_self). Pairs that lie near each other on the flat pattern (within
+them -- are found and pushed apart by proximity impulses (engine.cloth.kernels_self). They are
+found among the pairs a spatial hash listed within the thickness and a slack, listed again only
+once the cloth has moved half that slack. Pairs that lie near each other on the flat pattern (within
 REST_RINGS cloth edges along the mesh: a fold's two sides next to its crease) are never pushed
 apart, nor, while sewing, the two sides of a stitch and their neighbours.
 
@@ -23,7 +24,8 @@ from engine.errors import InputError
 REST_RINGS = 1.5  # cloth edges: vertices this near on the pattern (its own ring of 8 on the grid) may lie as near as folds put them
 PASSES = 3  # Gauss-Seidel passes of the response over the pairs found
 MAX_THICKNESS = 3.0  # cloth edges: a thicker layer would make every vertex's rest neighbourhood (and its cost) balloon
-PAIRS_PER_VERTEX = 32  # the pairs kept at a check, per vertex; past that (a crumpled heap) the rest wait
+PAIRS_PER_VERTEX = 32  # candidate pairs kept, per vertex; past that (a crumpled heap) the rest are left out
+SLACK = 0.5  # cloth edges: pairs within thickness + this are listed, and the list kept while no vertex moves half this
 
 
 def all_triangles(quads: np.ndarray, tris: np.ndarray) -> np.ndarray:
@@ -80,7 +82,10 @@ def rest_neighbours(n: int, pairs: np.ndarray, lengths: np.ndarray, radius: floa
 
 class SelfContact:
     """The self-collision pass of one cloth model (module doc): `thickness` m kept between layers,
-    checked every `every` steps."""
+    checked every `every` steps. The hash is searched only when the cloth has moved: it lists
+    every vertex-triangle pair within thickness + SLACK edges (a Verlet list), and each check
+    looks at those pairs alone until a vertex, now or predicted, is half the slack from where it
+    was when they were listed."""
 
     def __init__(self, model: ClothModel, thickness: float, every: int):
         self.model, self.thickness, self.every = model, float(thickness), int(every)
@@ -91,24 +96,28 @@ class SelfContact:
                              f"{1000 * h:g} mm edges), or a coarser cloth")
         self.tris = all_triangles(model.quads, model.tris)
         self.radius = rest_radius(h, self.thickness)
+        self.slack = SLACK * h
         planar = model.kind != FLEXION  # (along the cloth: a flexion spring spans two edges)
         self._springs, self._rest = model.springs[planar], model.rest[planar]
         self.near = rest_neighbours(model.n, self._springs, self._rest, self.radius)
         self._sewing = (None, self.near)  # (the stitch pairs, the rest neighbours with them)
-        # a cell holds a triangle's box grown by the thickness (at most two cells a side)
-        self.grid = _Hash(len(self.tris), model.edge_length + 2.0 * self.thickness)
-        self.xp = np.zeros((model.n, 3))
-        self.mark = np.zeros(model.n, dtype=np.int32)
-        self._grow(4 * model.n + 16)
+        # a cell holds a triangle's box grown by the reach (at most two cells a side)
+        self.grid = _Hash(len(self.tris), h + 2.0 * (self.thickness + self.slack))
+        self.xp, self.x0 = np.zeros((model.n, 3)), np.zeros((model.n, 3))
+        self.mark, self.tmark = np.zeros(model.n, dtype=np.int32), np.zeros(len(self.tris), dtype=np.int32)
         self.cap = PAIRS_PER_VERTEX * model.n + 16
+        self._grow(4 * model.n + 16)
+        self.n_cand = 0
+        self._listed = None  # the rest neighbours the pairs were listed with (None: not listed yet)
         self.schedule = CheckSchedule()
         self.found = 0  # pairs found at the last check
-        self.dropped = 0  # of those, past the cap (PAIRS_PER_VERTEX) and left for later checks
+        self.listings = 0  # searches of the hash
+        self.dropped = 0  # candidate pairs past the cap (PAIRS_PER_VERTEX) at the last listing, left out
         self.pushed = 0  # pairs whose velocity the last check changed
 
     def _grow(self, m: int) -> None:
-        self.c_v = np.zeros(m, dtype=np.int32)
-        self.c_t = np.zeros((m, 3), dtype=np.int32)
+        self.cand_v, self.cand_t = np.zeros(m, dtype=np.int32), np.zeros((m, 3), dtype=np.int32)
+        self.c_v, self.c_t = np.zeros(m, dtype=np.int32), np.zeros((m, 3), dtype=np.int32)
         self.c_w, self.c_n, self.c_d = np.zeros((m, 3)), np.zeros((m, 3)), np.zeros(m)
 
     def _neighbours(self, stitches: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -121,6 +130,22 @@ class SelfContact:
             self._sewing = (stitches, rest_neighbours(self.model.n, pairs, lengths, self.radius))
         return self._sewing[1]
 
+    def _list(self, x: np.ndarray, near: tuple[np.ndarray, np.ndarray]) -> None:
+        """The candidate pairs of x: within thickness + slack, from the hash."""
+        h, reach = self.grid, self.thickness + self.slack
+        K.triangle_boxes(x, x, self.tris, reach, h.lo, h.hi)
+        h.fill()
+        args = (x, self.tris, h.packed, h.inv_c, h.start, h.entries, near[0], near[1], reach)
+        m = K.find_near(*args, self.cand_v, self.cand_t, self.mark, self.tmark)
+        if m > len(self.cand_v) < self.cap:
+            self._grow(min(2 * m, self.cap))
+            m = K.find_near(*args, self.cand_v, self.cand_t, self.mark, self.tmark)
+        self.dropped = max(0, m - len(self.cand_v))  # (past the cap: the first pairs, by vertex, kept)
+        self.n_cand = m - self.dropped
+        self.x0[:] = x
+        self._listed = near
+        self.listings += 1
+
     def step(self, state: ClothState, iteration: int, dt: float, push_rate: float, friction: float,
              stitches: np.ndarray | None = None) -> bool:
         """The pass, if `iteration` checks (every `every` steps): pairs found with the points
@@ -129,22 +154,19 @@ class SelfContact:
         ahead = self.schedule.now(self.every, iteration)
         if not ahead:
             return False
-        x, v, h = state.x, state.v, self.grid
+        x, v = state.x, state.v
         np.multiply(v, dt * ahead, out=self.xp)
         self.xp += x
         if not np.isfinite(self.xp).all():  # (the scene's own check names the failure)
             return True
-        K.triangle_boxes(x, self.xp, self.tris, self.thickness, h.lo, h.hi)
-        h.fill()
-        near_ptr, near = self._neighbours(stitches)
-        args = (x, self.xp, self.tris, h.packed, h.inv_c, h.start, h.entries, near_ptr, near, self.thickness)
-        m = K.find_contacts(*args, self.c_v, self.c_t, self.c_w, self.c_n, self.c_d, self.mark)
-        if m > len(self.c_v) < self.cap:
-            self._grow(min(2 * m, self.cap))
-            m = K.find_contacts(*args, self.c_v, self.c_t, self.c_w, self.c_n, self.c_d, self.mark)
+        near = self._neighbours(stitches)
+        # a pair not listed was farther than thickness + slack; neither end has moved half the
+        # slack since, so it is still farther than the thickness, now and predicted
+        if near is not self._listed or K.moved_past(x, self.xp, self.x0, 0.5 * self.slack):
+            self._list(x, near)
+        m = K.find_contacts(x, self.xp, self.cand_v, self.cand_t, self.n_cand, self.thickness,
+                            self.c_v, self.c_t, self.c_w, self.c_n, self.c_d)
         self.found = m
-        self.dropped = max(0, m - len(self.c_v))  # (past the cap: the first pairs, by vertex, are answered)
-        m -= self.dropped
         self.pushed = K.respond_contacts(v, self.model.inv_mass, self.c_v, self.c_t, self.c_w, self.c_n, self.c_d,
                                          m, self.thickness, dt * ahead, push_rate, friction, PASSES)
         return True
