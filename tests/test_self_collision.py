@@ -203,3 +203,39 @@ def test_the_crossing_counter_agrees_with_brute_force(two_sheets):
     tris = all_triangles(model.quads, model.tris)
     off, _ = _run(model, x, False, 3000)
     assert self_intersections(off.x, tris)["pairs"] == crossings(off.x, tris) > 0
+
+
+def _placed(panels: dict, stitches: list | None = None):
+    """Rectangles {name: (width cm, height cm, translation (x, y, z) cm)}, in the xy plane."""
+    return build_garment(PatternSpec.model_validate({"pattern": {"panels": {
+        k: {"vertices": [[0, 0], [w, 0], [w, d], [0, d]], "edges": [{"endpoints": [i, (i + 1) % 4]} for i in range(4)],
+            "translation": list(t)} for k, (w, d, t) in panels.items()}, "stitches": stitches or []}}), h=0.015)
+
+
+def test_the_scene_turns_it_on_for_panels_placed_on_each_other():
+    """DrapeTuning.self_contact "auto": on where a panel is placed on another (a cuff over its
+    sleeve), off for panels apart or meeting only at their seam; "on"/"off" force it."""
+    from dataclasses import replace
+
+    from engine.scene.drape import dressing_config
+    from engine.scene.layers import needs_self_contact
+    from engine.scene.request import TryOnOptions
+    from engine.scene.tuning import Tuning
+
+    t = Tuning()
+    layered = _placed({"sleeve": (30, 40, (0, 0, 0)), "cuff": (30, 8, (0, 2, 1.5))})
+    apart = _placed({"a": (30, 40, (0, 0, 0)), "b": (30, 40, (0, 0, 30))})
+    seam = [[{"panel": "a", "edge": 1}, {"panel": "b", "edge": 3}]]
+    sewn = _placed({"a": (30, 40, (0, 0, 0)), "b": (30, 40, (30.5, 0, 0))}, seam)
+    assert needs_self_contact(layered, t)[0]
+    assert not needs_self_contact(apart, t)[0]
+    assert not needs_self_contact(sewn, t)[0]
+    assert needs_self_contact(_placed({"a": (30, 40, (0, 0, 0)), "b": (30, 40, (30.5, 0, 0))}), t)[0]  # (no seam)
+    assert needs_self_contact(apart, replace(t, drape=replace(t.drape, self_contact="on")))[0]
+    assert not needs_self_contact(layered, replace(t, drape=replace(t.drape, self_contact="off")))[0]
+    assert dressing_config(TryOnOptions(), t, True).self_collision
+    assert not dressing_config(TryOnOptions(), t, False).self_collision
+    assert not dressing_config(TryOnOptions(), replace(t, drape=replace(t.drape, self_contact="off")), True).self_collision
+    for bad in ({"self_contact": "yes"}, {"layer_gap": 0.0}, {"layer_share": 2.0}, {"layer_clear": float("nan")}):
+        with pytest.raises(InputError):
+            replace(t, drape=replace(t.drape, **bad)).validate()
