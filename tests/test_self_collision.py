@@ -13,10 +13,10 @@ from engine.cloth.fabrics import get_fabric
 from engine.cloth.model import ClothState, build_model
 from engine.cloth.selfcontact import SelfContact, all_triangles, self_intersections
 from engine.cloth.solver import ClothSolver
-from engine.collide.base import Collider
 from engine.errors import InputError
 from engine.garment.garment import build_garment
 from engine.pattern.spec import PatternSpec
+from tests.test_cloth import _CountingCollider as Floor  # a flat floor at y = 0 with a 5 mm band
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -28,18 +28,6 @@ def one_numba_thread():
     numba.set_num_threads(1)
     yield
     numba.set_num_threads(before)
-
-
-class Floor(Collider):
-    """A flat floor at y = 0 with a 5 mm band (status/normal/depth as the maps give them)."""
-
-    def query(self, p):
-        tol = 0.005
-        depth = tol - p[:, 1]
-        st = np.where(depth > tol, 2, np.where(depth > 0, 1, 0)).astype(np.int8)
-        n = np.zeros_like(p)
-        n[:, 1] = 1.0
-        return st, n, np.zeros_like(p), depth
 
 
 def _spec(panels: dict) -> PatternSpec:

@@ -61,32 +61,32 @@ def fill_hash(lo, hi, inv_c, start, entries, packed):
     mask = start.shape[0] - 2
     for k in range(start.shape[0]):
         start[k] = 0
-    for b in range(lo.shape[0]):
-        if _too_wide(lo[b, 0], lo[b, 1], lo[b, 2], hi[b, 0], hi[b, 1], hi[b, 2], inv_c):
-            continue
-        for ix in range(_cell(lo[b, 0], inv_c), _cell(hi[b, 0], inv_c) + 1):
-            for iy in range(_cell(lo[b, 1], inv_c), _cell(hi[b, 1], inv_c) + 1):
-                for iz in range(_cell(lo[b, 2], inv_c), _cell(hi[b, 2], inv_c) + 1):
-                    start[_key(ix, iy, iz, mask) + 1] += 1
-    for k in range(1, start.shape[0]):
-        start[k] += start[k - 1]
-    total = start[start.shape[0] - 1]
-    if total > entries.shape[0]:
-        return total
-    # start[k] is now where bucket k begins: fill with it as the cursor, then shift it back
-    for b in range(lo.shape[0]):
-        if _too_wide(lo[b, 0], lo[b, 1], lo[b, 2], hi[b, 0], hi[b, 1], hi[b, 2], inv_c):
-            continue
-        for ix in range(_cell(lo[b, 0], inv_c), _cell(hi[b, 0], inv_c) + 1):
-            for iy in range(_cell(lo[b, 1], inv_c), _cell(hi[b, 1], inv_c) + 1):
-                for iz in range(_cell(lo[b, 2], inv_c), _cell(hi[b, 2], inv_c) + 1):
-                    k = _key(ix, iy, iz, mask)
-                    e = start[k]
-                    entries[e] = b
-                    for c in range(3):
-                        packed[e, c] = lo[b, c]
-                        packed[e, 3 + c] = hi[b, c]
-                    start[k] += 1
+    total = 0
+    # pass 0 counts each bucket's entries into start[k + 1]; between the passes start becomes
+    # where each bucket begins, pass 1 fills with it as the cursor, then it is shifted back
+    for filling in range(2):
+        if filling:
+            for k in range(1, start.shape[0]):
+                start[k] += start[k - 1]
+            total = start[start.shape[0] - 1]
+            if total > entries.shape[0]:
+                return total
+        for b in range(lo.shape[0]):
+            if _too_wide(lo[b, 0], lo[b, 1], lo[b, 2], hi[b, 0], hi[b, 1], hi[b, 2], inv_c):
+                continue
+            for ix in range(_cell(lo[b, 0], inv_c), _cell(hi[b, 0], inv_c) + 1):
+                for iy in range(_cell(lo[b, 1], inv_c), _cell(hi[b, 1], inv_c) + 1):
+                    for iz in range(_cell(lo[b, 2], inv_c), _cell(hi[b, 2], inv_c) + 1):
+                        k = _key(ix, iy, iz, mask)
+                        if not filling:
+                            start[k + 1] += 1
+                            continue
+                        e = start[k]
+                        entries[e] = b
+                        for c in range(3):
+                            packed[e, c] = lo[b, c]
+                            packed[e, 3 + c] = hi[b, c]
+                        start[k] += 1
     for k in range(start.shape[0] - 1, 0, -1):
         start[k] = start[k - 1]
     start[0] = 0
