@@ -31,6 +31,9 @@ class StepConfig:
     hold_shear: bool = False  # the shear springs' forces held with the flexion springs' (still limited every step)
     keep_forces: bool = True  # keep each step's forces (FireRelaxer reads them)
     late_guard: bool = False  # guard at the next step's force pass, from its list of long springs
+    self_collision: bool = False  # cloth-cloth contact within the cloth (engine.cloth.selfcontact)
+    self_thickness: float = 0.003  # m: ... kept between two layers
+    self_every: int = 2  # ... checked every this many steps
 
     def __post_init__(self):
         if self.velocity_mode not in VM_MODES:
@@ -39,13 +42,14 @@ class StepConfig:
         if self.precision not in PRECISIONS:
             raise InputError(f"precision '{self.precision}': use {' or '.join(PRECISIONS)}")
         for name, lo, hi in (("vm_passes", 1, 100), ("contact_rounds", 1, 16), ("flexion_every", 1, 16),
-                             ("requery_every", 1, 1000)):
+                             ("requery_every", 1, 1000), ("self_every", 1, 64)):
             k = getattr(self, name)
             if not (isinstance(k, (int, np.integer)) and lo <= k <= hi):
                 raise InputError(f"{name} {k}: use a whole number {lo} .. {hi}")
         if self.strain_guard is not None and not (0.0 <= self.strain_guard <= 0.5):
             raise InputError(f"strain_guard {self.strain_guard}: use 0 .. 0.5 (or None: off)")
-        for name, hi in (("guard_step", 0.01), ("recover", 1e9), ("push_time", 0.2), ("requery_move", 0.05)):
+        for name, hi in (("guard_step", 0.01), ("recover", 1e9), ("push_time", 0.2), ("requery_move", 0.05),
+                         ("self_thickness", 0.02)):
             v = getattr(self, name)
             if not (0 < v <= hi):
                 raise InputError(f"{name} {v}: use a positive number up to {hi:g}")

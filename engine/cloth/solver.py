@@ -26,6 +26,7 @@ from engine.cloth.kernels_strain import VM_PROVOT, max_strain
 from engine.cloth.model import ClothModel, ClothState
 from engine.cloth.passes import Forcing
 from engine.cloth.schedule import CheckSchedule
+from engine.cloth.selfcontact import SelfContact
 from engine.collide.base import Collider
 from engine.errors import InputError
 
@@ -74,6 +75,8 @@ class ClothSolver:
         m = len(self.buf.points)
         self.answers = None if collider is None else CarriedAnswers(collider, config, m, model.params.tolerance)
         self.schedule = CheckSchedule()
+        self.self_contact = (SelfContact(model, config.self_thickness, config.self_every)
+                             if config.self_collision else None)
         self.timing = {"cloth": 0.0, "collision": 0.0}
         self.iterations = 0
         self.last_hits = 0  # points in contact at the last collision check
@@ -118,6 +121,11 @@ class ClothSolver:
         if c.attachment is not None:
             passes.attach(state, c.attachment)
         t1 = time.perf_counter()
+        # cloth-cloth contact within the cloth, every self_every steps (before the body's
+        # response: the body has the last word)
+        if self.self_contact is not None:
+            self.self_contact.step(state, self.iterations, dt, 1.0 / cfg.push_time, forcing.friction,
+                                   None if sewing is None else sewing.pairs)
         # collision detection and response (vertices and face points, eq. 12/15) every
         # collide_every steps, the points predicted that far ahead, alternated with the strain
         # limit; in between, the reaction force and the held contacts keep cloth out of the body
@@ -188,6 +196,8 @@ class ClothSolver:
         self.dt = self._checked_dt(model, dt)
         self.model = model
         self.buf.restiffen(model)
+        if self.self_contact is not None:
+            self.self_contact.model = model  # (its masses)
 
     def kinetic_energy(self, state: ClothState) -> float:
         return float(kinetic_energy(state.v, self.model.mass))

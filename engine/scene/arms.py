@@ -142,7 +142,7 @@ def lower_arms(lift: ArmLift, res: DrapeResult, request: TryOnOptions, tuning: T
                             tol=tuning.cloth.tolerance)
     t_maps = time.perf_counter() - t0
     collider = MapCollider(maps)
-    solver = ClothSolver(res.model, collider, dressing_config(request, tuning), dt=request.dt,
+    solver = ClothSolver(res.model, collider, dressing_config(request, tuning, res.self_contact[0]), dt=request.dt,
                          force_dt=request.force_dt)
     relax = int(math.ceil(RELAX_TIME / solver.dt))
     t0 = time.perf_counter()
@@ -170,7 +170,7 @@ def lower_arms(lift: ArmLift, res: DrapeResult, request: TryOnOptions, tuning: T
                   timing={**res.timing, "lowering_arms": t_lower, "settling": t_maps + t_relax + settled.timing["draping"],
                           "cloth_total": res.timing["cloth_total"] + walk_cloth_s + settle_cloth,
                           "collision_total": res.timing["collision_total"] + walk_coll_s + settle_coll},
-                  seam_gap_max=res.seam_gap_max, snapped=res.snapped, spec=res.spec,
+                  seam_gap_max=res.seam_gap_max, snapped=res.snapped, spec=res.spec, self_contact=res.self_contact,
                   collide_every={**res.collide_every, "lowering_arms": w["collision_every_steps"],
                                  "settling": settled.collide_every["draping"]},
                   lowering={"strain_max": float(w["strain_max"]), "penetration_mm": w["penetration_mm"],

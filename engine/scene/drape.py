@@ -37,6 +37,7 @@ from engine.errors import SimulationError
 from engine.garment.garment import Garment
 from engine.scene.request import TryOnOptions
 from engine.scene.attach import welded
+from engine.scene.layers import needs_self_contact
 from engine.scene.tuning import Tuning
 
 FELL_BELOW = -0.05  # m: cloth wholly below this height has fallen off the body (feet stand on y = 0)
@@ -48,9 +49,12 @@ Progress = Callable[[str, float, str], None]  # (stage, fraction 0..1, message)
 Observer = Callable[[str, np.ndarray, np.ndarray, "np.ndarray | None"], None]
 
 
-def dressing_config(request: TryOnOptions, tuning: Tuning) -> StepConfig:
-    """The solver's step configuration for sewing and draping."""
-    return replace(tuning.drape.step, velocity_mode=request.velocity_mode)
+def dressing_config(request: TryOnOptions, tuning: Tuning, layered: bool = False) -> StepConfig:
+    """The solver's step configuration for sewing and draping; layered: with cloth-cloth contact
+    (engine.scene.layers decides; DrapeTuning.self_contact "on" forces it)."""
+    on = tuning.drape.self_contact == "on" or (layered and tuning.drape.self_contact == "auto")
+    step = replace(tuning.drape.step, velocity_mode=request.velocity_mode)
+    return replace(step, self_collision=True) if on else step
 
 
 @dataclass
@@ -72,6 +76,7 @@ class DrapeResult:
     spec: object = None  # the PatternSpec dressed (set by engine.scene.tryon.run_tryon)
     lowering: dict | None = None  # dressed with the arms raised: the lowering's figures (engine.scene.arms)
     collide_every: dict = field(default_factory=dict)  # steps between collision checks by stage
+    self_contact: tuple[bool, str] = (False, "")  # cloth-cloth contact: on, and why (engine.scene.layers)
 
 
 def _noop(stage: str, fraction: float, message: str) -> None:
@@ -106,10 +111,11 @@ class _Dressing:
     progress: Progress
     observer: Observer | None
     attachment: Attachment | None = None  # labelled edges held while sewing (engine.scene.attach)
+    layered: bool = False  # with cloth-cloth contact (engine.scene.layers)
 
     def solver(self, model: ClothModel) -> ClothSolver:
-        return ClothSolver(model, self.collider, dressing_config(self.request, self.tuning), dt=self.request.dt,
-                           force_dt=self.request.force_dt)
+        return ClothSolver(model, self.collider, dressing_config(self.request, self.tuning, self.layered),
+                           dt=self.request.dt, force_dt=self.request.force_dt)
 
     def fresh_state(self) -> ClothState:
         return ClothState(self.garment.positions.copy(), np.zeros_like(self.garment.positions))
@@ -137,7 +143,8 @@ def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOpt
     """Sew the placed panels, then drape them, against the same collider (module doc). attachment:
     vertices held on planes while sewing and draping (engine.scene.attach)."""
     tuning.validate()
-    job = _Dressing(garment, collider, request, tuning, progress, observer, attachment)
+    layered = needs_self_contact(garment, tuning)
+    job = _Dressing(garment, collider, request, tuning, progress, observer, attachment, layered[0])
     model = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
                         get_fabric(request.fabric), _edge(garment), tuning.cloth)
     state = job.fresh_state()
@@ -159,6 +166,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOpt
     if sewn is not None:
         res.seam_gap_max, res.snapped = sewn.gap_max, sewn.snapped
         res.collide_every = {"sewing": sewn.every, **res.collide_every}
+    res.self_contact = layered
     return res
 
 

@@ -168,6 +168,7 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
         "settled": bool(res.settled),
         "collision_maps": map_info,
         "left_out": plan.left_out,
+        "self_contact": {"on": bool(res.self_contact[0]), "why": res.self_contact[1]},
         **({"placement": placement_note} if placement_note else {}),
         **({"attachment": held_note} if held_note else {}),
         "sew_friction": {"scale": float(tuning.sew.friction),

@@ -60,10 +60,22 @@ class DrapeTuning:
     too_tight: float = 0.10  # strain past the fabric's threshold by this: refused as too small ...
     refuse_after: float = 2.0  # s: ... once it stayed so this long
     step: StepConfig = StepConfig(strain_guard=0.009)  # (sewing uses it too; its guard waits until welded)
+    # cloth-cloth contact within the garment while sewing and draping (engine.cloth.selfcontact):
+    # auto = where parts may come to lie on each other (engine.scene.layers), on, or off
+    self_contact: str = "auto"
+    layer_gap: float = 0.03  # m: (auto) a vertex placed this near another panel ...
+    layer_clear: float = 0.05  # m: ... and farther than this along its panel from any seam ...
+    layer_share: float = 0.01  # ... on this share of the cloth: panels placed on each other
 
     def validate(self) -> None:
         if self.relax not in ("fire", "viscous"):
             raise InputError(f"unknown relaxation '{self.relax}': use fire or viscous")
+        if self.self_contact not in ("auto", "on", "off"):
+            raise InputError(f"self_contact '{self.self_contact}': use auto, on or off")
+        for name, hi in (("layer_gap", 0.2), ("layer_clear", 1.0), ("layer_share", 1.0)):
+            v = getattr(self, name)
+            if not (0.0 < v <= hi):
+                raise InputError(f"drape {name} {v}: use a positive number up to {hi:g}")
         if not (0.0 <= self.tight_every_step <= 1.0):
             raise InputError(f"tight_every_step {self.tight_every_step}: use 0 .. 1 (strain past the fabric's "
                              "threshold)")
