@@ -64,7 +64,7 @@ def worker(sizes: list[int], frames: int) -> dict:
     for size in sizes:
         texel = max(ext[0], ext[1]) / size
         r = MapRenderer(f, texel=texel, tol=0.005, with_velocity=True)
-        times, finish = [], []
+        times = []
         for k in range(frames + 5):
             vk = v + 0.001 * np.sin(k)          # a moving body: new positions every frame
             t0 = time.perf_counter()

@@ -890,7 +890,7 @@ def _collar(inf, used, size, f: Part, b: Part) -> None:
     picks = used.get("collar", [])
     if not picks:
         return
-    fs, bs = bodice_spans(f), bodice_spans(b)
+    fs = bodice_spans(f)
     b_l = _span(b, b.marks["cn"], b.marks["hps_l"], b.marks["ch"])
     b_r = _span(b, b.marks["hps_r"], b.marks["cn"], b.marks["ch"])
     f_n = Span(f.name, fs["neck"].s1, fs["neck"].s0, -fs["neck"].dir)  # left to right
