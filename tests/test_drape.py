@@ -326,11 +326,11 @@ def test_a_garmentcode_t_shirt_dresses_a_body_it_was_not_made_for(tmp_path, scan
     assert rep["seam_gap_mm"]["snapped"] == 0
 
 
-@pytest.mark.parametrize("body_arg, says", [(str(SMPL_BODY), "carried"), (str(SAMPLE_BODY), None),
-                                             ("default:female", "another body")])
+@pytest.mark.parametrize("body_arg, says", [("default:female,weight=1.0,height=1.70", "carried"),
+                                             (str(SAMPLE_BODY), None), ("default:female", "another body")])
 def test_a_carried_pattern_whose_seams_stay_open_says_the_placement_may_be_why(body_arg, says):
     """Sewing that fails (here: a sewing budget far too short to close the sample skirt's seams)
-    on a body the pattern was not made for (an SMPL body of about the same girths) says that its
+    on a body the pattern was not made for (girths 3-7 cm from the mean body's) says that its
     placement was carried from GarmentCode's mean body, and what to do; on a body of other girths
     (the default female's bust is 12 cm smaller), first that the pattern is for another body, both
     bodies' girths named; on its own body neither."""
@@ -351,6 +351,24 @@ def test_a_carried_pattern_whose_seams_stay_open_says_the_placement_may_be_why(b
     if says == "another body":
         assert re.search(r"mean body \(bust \d+, waist \d+, hips \d+ cm\), and this body's are bust \d+, "
                          r"waist \d+, hips \d+ cm", msg), msg
+
+
+def test_a_layout_that_clears_a_like_body_keeps_its_own_placement():
+    """GarmentCode makes patterns for any body (its sampler's --body): on a body whose landmarks and
+    girths are like its mean body's (the SMPL body) a pattern's own layout is kept where it
+    clears the body; moved 12 cm back, through the torso, it is carried by the landmarks instead;
+    on a body of other girths (default:female) it is carried."""
+    from engine.body import resolve_body
+    from engine.garment.place import CARRIED, OWN_CLEARS, pattern_placement
+    from engine.pattern.io import load_pattern
+
+    smpl = resolve_body(str(SMPL_BODY))
+    spec = load_pattern(GC_SHIRT)
+    assert pattern_placement(spec, smpl)[1] == OWN_CLEARS
+    assert pattern_placement(spec, resolve_body("default:female"))[1] == CARRIED
+    for p in spec.pattern.panels.values():
+        p.translation = [p.translation[0], p.translation[1], p.translation[2] - 12.0]  # cm
+    assert pattern_placement(spec, smpl)[1] == CARRIED
 
 
 def test_a_garment_that_falls_off_the_body_is_refused():

@@ -599,6 +599,11 @@ def pattern_placement(spec, body: Body):
             tgt.append(t)
     if len(ref) == len(GARMENTCODE_LANDMARKS) + 1 and np.abs(np.subtract(ref, tgt)).max() < SAME_BODY:
         return own, None
+    rel = spec.properties.curvature_coords == "relative"
+    girths = np.array([float(getattr(m, k)) - g for k, g in GARMENTCODE_GIRTHS])
+    if (len(ref) == len(GARMENTCODE_LANDMARKS) + 1 and np.abs(np.subtract(ref, tgt)).max() < LIKE_BODY
+            and np.all(np.abs(girths) < LIKE_GIRTH) and _clears(spec, own, body, rel)):
+        return own, OWN_CLEARS
     ref_a, tgt_a = np.array(ref), np.array(tgt)
     sections = BodySections(body)
 
@@ -611,7 +616,6 @@ def pattern_placement(spec, body: Body):
         p[:, 1] = y_new
         return p
 
-    rel = spec.properties.curvature_coords == "relative"
     outlines = {n: own(n, pn, geo.outline(pn, spec.scale, rel)) for n, pn in spec.pattern.panels.items()}
     sleeves = {n: s for n, s in ((n, sleeve_side(o)) for n, o in outlines.items()) if s is not None}
     arms = _arms_of(body, m) if sleeves else None
@@ -650,6 +654,36 @@ def pattern_placement(spec, body: Body):
     return place, CARRIED
 
 
+def _clears(spec, own, body: Body, rel: bool) -> bool:
+    """Whether the pattern's own layout lies round this body as GarmentCode lays it round the body
+    it was made for: no more than CLEAR_INSIDE of its panels' points (outlines and a 2 cm grid
+    inside them) inside the body. GarmentCode can make a pattern for any body (its sampler's
+    --body), and a layout that clears a body of like landmarks was made for one like it."""
+    from matplotlib.path import Path as MplPath
+
+    from engine.collide.bvh import MeshBVH
+    from engine.pattern import geometry as geo
+
+    pts = []
+    for n, pn in spec.pattern.panels.items():
+        o = geo.outline(pn, spec.scale, rel)
+        lo, hi = o.min(axis=0), o.max(axis=0)
+        gx, gy = np.meshgrid(np.arange(lo[0], hi[0], 0.02), np.arange(lo[1], hi[1], 0.02))
+        grid = np.stack([gx.ravel(), gy.ravel()], axis=1)
+        grid = grid[MplPath(o).contains_points(grid)] if len(grid) else grid
+        pts.append(own(n, pn, np.concatenate([o, grid])))
+    pts = np.concatenate(pts)
+    if not np.all(np.isfinite(pts)):
+        return False
+    d = MeshBVH(body.vertices, body.faces).signed_distance(pts, max_distance=0.1)
+    return float((d < 0).mean()) <= CLEAR_INSIDE
+
+
+LIKE_BODY = 0.06  # m: landmarks all this close to the mean body's ...
+LIKE_GIRTH = 0.05  # m: ... and bust, waist and hips this close: a body like it
+CLEAR_INSIDE = 0.005  # share of a layout's points inside the body it still clears
+OWN_CLEARS = ("the pattern's own placement: its layout clears this body, whose landmarks and girths are "
+              "like GarmentCode's mean body's")
 CARRIED = ("placed from the body's landmarks and arms (the pattern's own placement is for GarmentCode's "
            "mean body)")
 # what a try-on whose placement was CARRIED adds to a sewing failure (engine.scene.tryon)
