@@ -362,13 +362,18 @@ def test_a_layout_that_clears_a_like_body_keeps_its_own_placement():
     from engine.garment.place import CARRIED, OWN_CLEARS, pattern_placement
     from engine.pattern.io import load_pattern
 
-    smpl = resolve_body(str(SMPL_BODY))
+    from engine.collide.bvh import MeshBVH
+
+    def inside(body):
+        return lambda p: MeshBVH(body.vertices, body.faces).signed_distance(p, max_distance=0.1) < 0.0
+
+    smpl, female = resolve_body(str(SMPL_BODY)), resolve_body("default:female")
     spec = load_pattern(GC_SHIRT)
-    assert pattern_placement(spec, smpl)[1] == OWN_CLEARS
-    assert pattern_placement(spec, resolve_body("default:female"))[1] == CARRIED
+    assert pattern_placement(spec, smpl, inside(smpl))[1] == OWN_CLEARS
+    assert pattern_placement(spec, female, inside(female))[1] == CARRIED
     for p in spec.pattern.panels.values():
         p.translation = [p.translation[0], p.translation[1], p.translation[2] - 12.0]  # cm
-    assert pattern_placement(spec, smpl)[1] == CARRIED
+    assert pattern_placement(spec, smpl, inside(smpl))[1] == CARRIED
 
 
 def test_a_garment_that_falls_off_the_body_is_refused():

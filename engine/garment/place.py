@@ -565,7 +565,7 @@ def sleeve_tube(joints: np.ndarray, side: str, p: np.ndarray, o: np.ndarray) -> 
     return wrap_sleeve(uv, arm_path(joints), int(round(0.15 / 0.005)), np.full(len(p), radius))
 
 
-def pattern_placement(spec, body: Body):
+def pattern_placement(spec, body: Body, inside=None):
     """A pattern file's placement on `body`: its own translation and rotation (GarmentCode's,
     engine.garment.garment.spec_placement) on the body it was made for; on another body the
     placed panels are carried there from GarmentCode's mean body by the landmarks -- every
@@ -580,7 +580,8 @@ def pattern_placement(spec, body: Body):
     Measured on GarmentCode's own T-shirt (flat front and back panels 45 cm apart, half sleeves
     laid beside the arms), carried by heights alone: it fell from the shoulders of default:female
     and default:male before its 5 cm shoulder seams closed; wrapped, it sews on both.
-    Returns (placement, a note or None)."""
+    inside: points (N, 3) -> (N,) bool, inside the body (the scene's; None: a pattern's own layout
+    is kept on its own body only). Returns (placement, a note or None)."""
     from engine.body.measure import measure
     from engine.garment.garment import spec_placement
     from engine.pattern import geometry as geo
@@ -602,7 +603,7 @@ def pattern_placement(spec, body: Body):
     rel = spec.properties.curvature_coords == "relative"
     girths = np.array([float(getattr(m, k)) - g for k, g in GARMENTCODE_GIRTHS])
     if (len(ref) == len(GARMENTCODE_LANDMARKS) + 1 and np.abs(np.subtract(ref, tgt)).max() < LIKE_BODY
-            and np.all(np.abs(girths) < LIKE_GIRTH) and _clears(spec, own, body, rel)):
+            and np.all(np.abs(girths) < LIKE_GIRTH) and inside is not None and _clears(spec, own, inside, rel)):
         return own, OWN_CLEARS
     ref_a, tgt_a = np.array(ref), np.array(tgt)
     sections = BodySections(body)
@@ -654,14 +655,13 @@ def pattern_placement(spec, body: Body):
     return place, CARRIED
 
 
-def _clears(spec, own, body: Body, rel: bool) -> bool:
+def _clears(spec, own, inside, rel: bool) -> bool:
     """Whether the pattern's own layout lies round this body as GarmentCode lays it round the body
     it was made for: no more than CLEAR_INSIDE of its panels' points (outlines and a 2 cm grid
-    inside them) inside the body. GarmentCode can make a pattern for any body (its sampler's
-    --body), and a layout that clears a body of like landmarks was made for one like it."""
+    inside them) inside the body (`inside`). GarmentCode can make a pattern for any body (its
+    sampler's --body), and a layout that clears a body of like landmarks was made for one like it."""
     from matplotlib.path import Path as MplPath
 
-    from engine.collide.bvh import MeshBVH
     from engine.pattern import geometry as geo
 
     pts = []
@@ -673,10 +673,7 @@ def _clears(spec, own, body: Body, rel: bool) -> bool:
         grid = grid[MplPath(o).contains_points(grid)] if len(grid) else grid
         pts.append(own(n, pn, np.concatenate([o, grid])))
     pts = np.concatenate(pts)
-    if not np.all(np.isfinite(pts)):
-        return False
-    d = MeshBVH(body.vertices, body.faces).signed_distance(pts, max_distance=0.1)
-    return float((d < 0).mean()) <= CLEAR_INSIDE
+    return bool(np.all(np.isfinite(pts))) and float(np.mean(inside(pts))) <= CLEAR_INSIDE
 
 
 LIKE_BODY = 0.06  # m: landmarks all this close to the mean body's ...

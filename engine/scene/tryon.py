@@ -103,7 +103,10 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     if place is None:
         from engine.garment.place import pattern_placement
 
-        place, placement_note = pattern_placement(spec, body)
+        def inside(p):  # the placement's test of a pattern's own layout (against the body as loaded)
+            return bvh_job.result().signed_distance(p, max_distance=0.1) < 0.0
+
+        place, placement_note = pattern_placement(spec, body, inside)
     garment = build_garment(spec, h=request.h, place=place, source=source)
     plan = plan_maps(body, garment, request.texel, request.collision)
     t0 = time.perf_counter()
