@@ -124,20 +124,20 @@ def test_a_waistband_and_a_gathered_skirt_drape_on_their_body(name):
 @pytest.mark.slow
 @pytest.mark.integration
 def test_a_fresh_seeded_sample_drapes(tmp_path):
-    """Ten designs freshly drawn by GarmentCode's sampler (seed 7) on mean_female. Where we stand
-    (docs/patterns.md): about a quarter of GarmentCode's designs meet the bars; the target is 95 %.
-    This guards against losing ground: at least 2 of 10 must drape."""
+    """Twenty designs freshly drawn by GarmentCode's sampler (seed 7) on mean_female. Where we
+    stand (docs/patterns.md): 10-25 % of GarmentCode's designs meet the bars; the target is 95 %.
+    This guards against losing ground: at least 2 of 20 must drape."""
     from engine.body import resolve_body
     from engine.scene.request import TryOnOptions
 
     pytest.importorskip("svgpathtools")
     bench = _bench()
     try:
-        paths = bench.draw("mean_female", 10, 7, tmp_path / "patterns")
+        paths = bench.draw("mean_female", 20, 7, tmp_path / "patterns")
     except SystemExit as e:
         pytest.fail(str(e))
     body = resolve_body(str(BODY))
     rows = [bench.drape_one(p, body, TryOnOptions()) for p in paths]
     ok = [r["design"] for r in rows if r["ok"]]
     print(f"{len(ok)} of {len(rows)} drape:", ok, file=sys.stderr)
-    assert len(rows) >= 8 and len(ok) >= 2, [(r["design"], r.get("reason")) for r in rows]
+    assert len(rows) >= 16 and len(ok) >= 2, [(r["design"], r.get("reason")) for r in rows]
