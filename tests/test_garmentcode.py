@@ -108,6 +108,23 @@ def test_gathered_seams_pair_their_edges_evenly():
     assert gathered >= 4, "the handful lost its gathered seams"
 
 
+def test_a_design_whose_outlines_cross_says_so_when_it_falls():
+    """GarmentCode's hood design (019) cuts its bodice's neckline past the armholes: the warning
+    that the garment slid names those panels and why they may not hold; a waistband (001) has no
+    such panel and its warning says nothing of it."""
+    from engine.garment.garment import build_garment
+    from engine.pattern.io import load_pattern
+    from engine.scene.tryon import crossing_hint, hang_warnings
+
+    crossed = build_garment(load_pattern(DESIGNS / "mean_female_1_019_specification.json"), h=0.03)
+    hint = crossing_hint(crossed)
+    assert hint is not None and "ftorso" in hint and "neckline cut past the armhole" in hint
+    slid = hang_warnings({"top": -0.2, "hem": 0.0}, hint)
+    assert len(slid) == 1 and slid[0].startswith("the garment slid") and hint in slid[0]
+    plain = build_garment(load_pattern(DESIGNS / "mean_female_1_001_specification.json"), h=0.03)
+    assert crossing_hint(plain) is None
+
+
 @pytest.mark.integration
 @pytest.mark.parametrize("name", ["mean_female_1_001", "mean_female_1_012"])
 def test_a_waistband_and_a_gathered_skirt_drape_on_their_body(name):

@@ -7,6 +7,7 @@ The planner looks at the scene first and records what it leaves out ("left out: 
 from __future__ import annotations
 
 import json
+import re
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
@@ -138,7 +139,7 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
         body = loaded
     shift = hang_shift(garment.positions, res.positions)
     if shift["top"] < -SLID_OFF:  # settled, but not on the body: never written as a result
-        raise _slid(body, res, shift, placement_note)
+        raise _slid(body, res, shift, placement_note, crossing_hint(garment))
     pen = penetration_stats(body.vertices, body.faces, res.positions, bvh=bvh)
     iters = sum(res.iterations.values())
     tc, tk = res.timing["cloth_total"], res.timing["collision_total"]
@@ -177,7 +178,7 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
         "sew_friction": {"scale": float(tuning.sew.friction),
                          "why": sew_note or ("asked for" if tuning.sew.friction else "the panels slide into place")},
         "tight": bool(res.strain_max > fab.strain_threshold + TIGHT),
-        "warnings": garment.warnings + hang_warnings(shift) + fit_warnings(res.strain_max, fab, res.settled,
+        "warnings": garment.warnings + hang_warnings(shift, crossing_hint(garment)) + fit_warnings(res.strain_max, fab, res.settled,
                                                                            tuning.drape.budget, pattern_file),
     }
     if lift is not None:
@@ -219,13 +220,14 @@ def _body_collider(body: Body, plan: TryOnPlan, request: TryOnOptions, tolerance
             {"maps": [], "bvh_triangles": int(len(body.faces))})
 
 
-def _slid(body: Body, res: DrapeResult, shift: dict, placement_note: str | None) -> SimulationError:
+def _slid(body: Body, res: DrapeResult, shift: dict, placement_note: str | None,
+          crossing: str | None = None) -> SimulationError:
     floor = float(body.vertices[:, 1].min())
     err = SimulationError(
         f"the garment slid {-100 * shift['top']:.0f} cm down the body (its top ended "
         f"{res.positions[:, 1].max() - floor:.2f} m above the floor): it did not stay where it was placed -- "
         "it is too large for this body, or its seams did not close around it; try a smaller size, or "
-        "check the pattern's panels")
+        "check the pattern's panels" + (f" ({crossing})" if crossing else ""))
     err.positions, err.triangles = res.positions.copy(), res.triangles  # for a picture
     err.too_large = True  # (engine.scene.garments: --size auto tries a smaller one)
     _carried_hint(err, placement_note, body, slid=True)
@@ -349,7 +351,8 @@ def sharp_folds(positions: np.ndarray, triangles: np.ndarray, degrees: float = 1
     return {"count": int((angles > np.radians(degrees)).sum()), "edges": int(len(angles)), "degrees": degrees}
 
 
-def hang_warnings(shift: dict[str, float]) -> list[str]:
+def hang_warnings(shift: dict[str, float], crossing: str | None = None) -> list[str]:
+    """What a drape that ended off where it was placed says; crossing: crossing_hint's, said with it."""
     out = []
     if shift["top"] < -TOP_DROP:
         out.append(f"the garment slid {-100 * shift['top']:.0f} cm down the body from where it was placed: "
@@ -357,7 +360,24 @@ def hang_warnings(shift: dict[str, float]) -> list[str]:
     if shift["hem"] > HEM_RISE:
         out.append(f"the garment's lowest point rose {100 * shift['hem']:.0f} cm from where it was placed: "
                    "it bunched up instead of hanging (look at the pictures)")
+    if out and crossing:
+        out[0] += f" ({crossing})"
     return out
+
+
+def crossing_hint(garment: Garment) -> str | None:
+    """Where panels' outlines cross themselves (engine.pattern.validate's warning), what that may do to
+    a drape: the parts beyond a crossing are joined to the rest only where the edges cross, and
+    cannot hold up what hangs from them (GarmentCode draws a wide neckline past the armholes so,
+    and the straps then let the bodice fall)."""
+    names = sorted({m.group(1) for w in garment.warnings if "crosses itself" in w
+                    for m in [re.search(r"panel '([^']+)'", w)] if m})
+    if not names:
+        return None
+    which = f"panel {names[0]}'s outline crosses" if len(names) == 1 else \
+        f"the outlines of panels {', '.join(names)} cross"
+    return (f"{which} {'itself' if len(names) == 1 else 'themselves'}: the parts beyond a crossing hang from a point and may not hold (a neckline "
+            "cut past the armhole) -- check those edges")
 
 
 def write_pattern(out: Path, spec: PatternSpec | None) -> list[Path]:
