@@ -657,7 +657,7 @@ def pattern_placement(spec, body: Body, inside=None):
 
 def _clears(spec, own, inside, rel: bool) -> bool:
     """Whether the pattern's own layout lies round this body as GarmentCode lays it round the body
-    it was made for: no more than CLEAR_INSIDE of its panels' points (outlines and a 2 cm grid
+    it was made for: no more than CLEAR_INSIDE of its panels' points (outlines and a grid, 2 cm or coarser,
     inside them) inside the body (`inside`). GarmentCode can make a pattern for any body (its
     sampler's --body), and a layout that clears a body of like landmarks was made for one like it."""
     from matplotlib.path import Path as MplPath
@@ -668,7 +668,8 @@ def _clears(spec, own, inside, rel: bool) -> bool:
     for n, pn in spec.pattern.panels.items():
         o = geo.outline(pn, spec.scale, rel)
         lo, hi = o.min(axis=0), o.max(axis=0)
-        gx, gy = np.meshgrid(np.arange(lo[0], hi[0], 0.02), np.arange(lo[1], hi[1], 0.02))
+        step = max(0.02, float(np.sqrt(np.prod(hi - lo) / 20_000)))  # (at most ~20,000 points a panel)
+        gx, gy = np.meshgrid(np.arange(lo[0], hi[0], step), np.arange(lo[1], hi[1], step))
         grid = np.stack([gx.ravel(), gy.ravel()], axis=1)
         grid = grid[MplPath(o).contains_points(grid)] if len(grid) else grid
         pts.append(own(n, pn, np.concatenate([o, grid])))
