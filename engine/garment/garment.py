@@ -47,6 +47,7 @@ class Garment:
     stitch_names: list[str]
     warnings: list[str] = field(default_factory=list)
     labelled: dict[str, np.ndarray] = field(default_factory=dict)
+    pinched: list[str] = field(default_factory=list)  # panels whose outline crosses itself, joined where it crosses
 
     @property
     def n_vertices(self) -> int:
@@ -148,4 +149,5 @@ def build_garment(spec: PatternSpec, h: float = 0.015, place: Placement | None =
                    tris=np.concatenate(tris).astype(np.int32), seams=seams_arr, seam_id=seam_id_arr,
                    panel_names=names, stitch_names=stitch_names,
                    warnings=[str(p) for p in problems],
-                   labelled={k: np.unique(np.concatenate(v)) for k, v in labelled.items()})
+                   labelled={k: np.unique(np.concatenate(v)) for k, v in labelled.items()},
+                   pinched=[n for n in names if meshes[n].pinched])

@@ -30,7 +30,8 @@ class PanelMesh:
     uv: (n, 2) float64 rest positions; quads: (Q, 4) int32 and tris: (T, 3) int32, wound so that
     their normal is the outline's orientation normal (+z for a counter-clockwise outline);
     edge_vertices[i]: (k_i + 1,) int32 vertex indices along outline edge i from its first to its
-    second endpoint; lattice: (n, 2) int32 grid (i, j) of interior vertices, -1 on the outline.
+    second endpoint; lattice: (n, 2) int32 grid (i, j) of interior vertices, -1 on the outline;
+    pinched: its outline crossed itself and was joined where it crosses (_pinch_crossings).
     """
 
     uv: np.ndarray
@@ -39,6 +40,7 @@ class PanelMesh:
     edge_vertices: list[np.ndarray]
     lattice: np.ndarray
     ccw: bool
+    pinched: bool = False
 
 
 @serial_kernel(fastmath=False)
@@ -143,10 +145,11 @@ def mesh_panel(edge_points: list[np.ndarray], h: float, name: str = "panel") -> 
     edge_vertices[-1][-1] = 0  # closes the loop
     edge_vertices = [ev % len(ring) for ev in edge_vertices]
     ring, loop, edge_vertices = _pinch_crossings(ring, edge_vertices, name)
+    pinched = len(loop) != len(ring)
     nb = len(ring)
     r = ring[loop]
     area = 0.5 * float(np.dot(r[:, 0], np.roll(r[:, 1], -1)) - np.dot(np.roll(r[:, 0], -1), r[:, 1]))
-    if abs(area) < (h * h) and len(loop) == len(ring):  # (a pinched outline's parts may cancel in the sum)
+    if abs(area) < (h * h) and not pinched:  # (a pinched outline's parts may cancel in the sum)
         raise InputError(f"panel '{name}' is too small to mesh at {h * 100:.1f} cm ({abs(area) * 1e4:.2f} cm^2)")
     ccw = area >= 0
 
@@ -211,4 +214,5 @@ def mesh_panel(edge_points: list[np.ndarray], h: float, name: str = "panel") -> 
     if not ccw:  # a clockwise outline faces -z: wind faces the same way
         quads = quads[:, ::-1].copy()
         tris = tris[:, ::-1].copy()
-    return PanelMesh(uv=uv, quads=quads, tris=tris, edge_vertices=edge_vertices, lattice=lattice, ccw=ccw)
+    return PanelMesh(uv=uv, quads=quads, tris=tris, edge_vertices=edge_vertices, lattice=lattice, ccw=ccw,
+                     pinched=pinched)

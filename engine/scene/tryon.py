@@ -7,7 +7,6 @@ The planner looks at the scene first and records what it leaves out ("left out: 
 from __future__ import annotations
 
 import json
-import re
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
@@ -366,12 +365,11 @@ def hang_warnings(shift: dict[str, float], crossing: str | None = None) -> list[
 
 
 def crossing_hint(garment: Garment) -> str | None:
-    """Where panels' outlines cross themselves (engine.pattern.validate's warning), what that may do to
+    """Where panels' outlines cross themselves (meshed joined at the crossings), what that may do to
     a drape: the parts beyond a crossing are joined to the rest only where the edges cross, and
     cannot hold up what hangs from them (GarmentCode draws a wide neckline past the armholes so,
     and the straps then let the bodice fall)."""
-    names = sorted({m.group(1) for w in garment.warnings if "crosses itself" in w
-                    for m in [re.search(r"panel '([^']+)'", w)] if m})
+    names = sorted(garment.pinched)
     if not names:
         return None
     which = f"panel {names[0]}'s outline crosses" if len(names) == 1 else \
