@@ -65,11 +65,11 @@ def _body(spec: str, up: Optional[str], front: Optional[str]):
 
 
 def _dressable(spec: str, up: Optional[str], front: Optional[str]):
-    """_body, with the hands moved off the hips where they touch them (engine.scene.arms.clear_hands)."""
-    from engine.scene.arms import clear_hands
+    """_body, with the arms turned out where they touch the torso or the hips (engine.scene.arms.clear_arms)."""
+    from engine.scene.arms import clear_arms
 
     loaded = _body(spec, up, front)
-    body = clear_hands(loaded)
+    body = clear_arms(loaded)
     if body is not loaded:
         typer.echo(f"note: {body.notes[-1]}", err=True)
     return body

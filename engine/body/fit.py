@@ -145,6 +145,7 @@ def _fit(scan: Body, ms, preset: str, notes: list[str]) -> Body:
     tree = cKDTree(tv)
     # 4. weights and segments from the nearest mapped template vertex facing the same way
     dist, near = _nearest_facing(tv, tmpl.faces, scan, tree)
+    near = mend_islands(scan.vertices, scan.faces, tmpl.segments, near)
     if np.median(dist) > FIT_MEDIAN_MAX:
         why = "; ".join(ms.notes)
         raise InputError(f"the default skeleton does not fit this body: fitted, the default body is "
@@ -381,6 +382,45 @@ def smooth_weights(vertices: np.ndarray, faces: np.ndarray, indices: np.ndarray,
     w = np.where(w > SMOOTH_DROP, w, 0.0)
     w /= w.sum(axis=1, keepdims=True)
     return used[top], w
+
+
+def mend_islands(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, near: np.ndarray) -> np.ndarray:
+    """`near` (a template vertex for each scan vertex, whose segment `labels[near]` and weights the
+    scan vertex takes) with every island mended: each segment (an arm, a leg, the torso, the
+    head) is one connected piece of a body's surface, so a piece of a segment's vertices apart
+    from its largest piece -- a hand lying on a thigh labelled leg, the torso's side under a
+    pressed arm labelled arm -- takes the template vertex of the nearest vertex (along the
+    surface) outside every such piece. Where limbs touch, the nearest template vertex is often
+    the other limb's, and the skin there stayed behind when the arms were turned out (a sheet
+    from the hand to the thigh; measured on the sample scan with its hands on the thighs)."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components, dijkstra
+
+    n = len(vertices)
+    seg = labels[near]
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    same = seg[e[:, 0]] == seg[e[:, 1]]
+    ones = np.ones(int(same.sum()))
+    _, comp = connected_components(sp.coo_matrix((ones, (e[same, 0], e[same, 1])), shape=(n, n)), directed=False)
+    island = np.zeros(n, bool)
+    for s in np.unique(seg):
+        mine = seg == s
+        sizes = np.bincount(comp[mine])
+        island[mine] = comp[mine] != np.argmax(sizes)
+    if not island.any() or island.all():
+        return near
+    # the nearest vertex outside the islands, along the surface (edges into an island only)
+    into = island[e[:, 0]] | island[e[:, 1]]
+    length = np.linalg.norm(vertices[e[into, 0]] - vertices[e[into, 1]], axis=1) + 1e-9
+    graph = sp.coo_matrix((length, (e[into, 0], e[into, 1])), shape=(n, n)).tocsr()
+    sources = np.flatnonzero(~island & np.isin(np.arange(n), e[into].ravel()))
+    if not len(sources):
+        return near
+    _, _, src = dijkstra(graph, directed=False, indices=sources, min_only=True, return_predecessors=True)
+    out = near.copy()
+    fix = island & (src >= 0)
+    out[fix] = near[src[fix]]
+    return out
 
 
 NEAREST_K = 16  # candidates for the nearest template vertex facing the same way

@@ -181,24 +181,34 @@ def lower_arms(lift: ArmLift, res: DrapeResult, request: TryOnOptions, tuning: T
 HAND_NEAR = 0.012  # m: hands closer than this to the hips or thighs (measure's hand_gap) ...
 HAND_CLEAR = 0.02  # m: ... are moved out until this far, turning the arms about the shoulders (as far
 # as the default bodies' A-pose hands hang from the hips: further out a hand nears the hip's flare)
-HAND_STEP = 2.0  # degrees a step
-HAND_MAX = 30.0  # degrees at most
+CLEAR_STEP = 2.5  # degrees a step
+CLEAR_MAX = LIFT_MAX  # degrees at most
 
 
-def clear_hands(body: Body) -> Body:
-    """The body to dress and walk: as given, or -- where its hands touch or nearly touch its hips
-    or thighs (a scan with its arms down) -- with the arms turned out about the shoulders
-    (the default skeleton fitted to it) until the hands hang HAND_CLEAR away, rigged in that
-    pose and saying so in its notes. There is no room for cloth between a hand and a thigh that
-    touch: trousers placed round the legs take the hands in, and a walk swings the hands into
-    the thighs. Returns the body unchanged when it cannot be fitted."""
-    from engine.body.measure import measure
+def clear_arms(body: Body) -> Body:
+    """The body to dress and walk: as given, or -- where its arms hang closer to its torso than
+    ARM_GAP_OK, or its hands touch or nearly touch its hips or thighs (a scan with its arms
+    down) -- with the arms turned out about the shoulders (the default skeleton fitted to it)
+    until they hang ARM_GAP_OK + LIFT_MARGIN from the torso and the hands HAND_CLEAR from the
+    hips, rigged in that pose and saying so in its notes. There is no room for cloth between an
+    arm and the torso, or a hand and a thigh, that touch: the torso's cloth is caught between
+    them and stretched (dressing with the arms raised and lowering them after left shirts and
+    dresses 24-36 % stretched on such scans), trousers placed round the legs take the hands in,
+    and a walk swings the hands into the thighs -- so such a scan is dressed and walked in an
+    A-pose, as a scan in that pose would be. Returns the body unchanged when it cannot be
+    fitted."""
+    from engine.body.measure import ARM_GAP_OK, measure
     from engine.body.motion import _rot, pose_joints
     from engine.body.types import Rig
     from engine.scene.walk import walking_body
 
-    gap = measure(body).hand_gap
-    if not gap < HAND_NEAR:
+    m0 = measure(body)
+    hands, arms = m0.hand_gap < HAND_NEAR, m0.arm_gap < ARM_GAP_OK
+
+    def cleared(m) -> bool:
+        return (not hands or not m.hand_gap < HAND_CLEAR) and (not arms or not m.arm_gap < ARM_GAP_OK + LIFT_MARGIN)
+
+    if not (hands or arms):
         return body
     try:
         rigged = walking_body(body)
@@ -207,17 +217,25 @@ def clear_hands(body: Body) -> Body:
     rig = rigged.rig
     if not {"upperarm01.L", "upperarm01.R"} <= set(rig.joint_names):
         return body
-    deg, got, v = 0.0, gap, rigged.vertices
-    while got < HAND_CLEAR and deg < HAND_MAX:
-        deg += HAND_STEP
+    deg, m, v = 0.0, m0, rigged.vertices
+    while not cleared(m) and deg < CLEAR_MAX:
+        deg += CLEAR_STEP
         v = _pose(rigged, deg)
-        got = measure(Body(vertices=v, faces=rigged.faces)).hand_gap
-        got = np.inf if not np.isfinite(got) else got
+        m = measure(Body(vertices=v, faces=rigged.faces))
     g = pose_joints(rig, {"upperarm01.L": _rot("z", deg), "upperarm01.R": _rot("z", -deg)})
     posed = Rig(joint_names=list(rig.joint_names), parents=rig.parents, rest_transforms=g,
                 skin_indices=rig.skin_indices, skin_weights=rig.skin_weights)
-    note = (f"the arms were turned {deg:.0f} degrees out from the body for dressing and walking: the hands "
-            f"{'touched' if gap < 0.002 else 'nearly touched'} the hips or thighs ({100 * gap:.1f} cm), "
-            f"and hang {100 * min(got, 1.0):.1f} cm away now")
+    why = []
+    if arms:
+        why.append(f"the arms hung {100 * m0.arm_gap:.1f} cm from the torso (there is no room for the cloth "
+                   f"between them), {_cm(m.arm_gap)} now")
+    if hands:
+        why.append(f"the hands {'touched' if m0.hand_gap < 0.002 else 'nearly touched'} the hips or thighs "
+                   f"({100 * m0.hand_gap:.1f} cm), {_cm(m.hand_gap)} away now")
+    note = f"the arms were turned {deg:.0f} degrees out from the body for dressing and walking: {'; '.join(why)}"
     return Body(vertices=v, faces=rigged.faces, name=body.name, segments=rigged.segments, rig=posed,
                 notes=list(rigged.notes) + [note], to_world=body.to_world)
+
+
+def _cm(gap: float) -> str:
+    return f"{100 * gap:.1f} cm" if np.isfinite(gap) and gap < 1.0 else "well clear"
