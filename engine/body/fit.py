@@ -293,13 +293,16 @@ def _pair_search(cost, t: list, k1: int, k2: int, grid1, grid2) -> None:
 
 def _arm_deltas(turns: dict) -> dict[str, np.ndarray]:
     """Rotations of the upper arms and forearms by turns[side] = (upper out, upper back, fore
-    out, fore back) degrees (out: about z, away from the body; back: about x)."""
+    out, fore back) degrees (back: about x, then out: about z, away from the body). Back
+    first: an arm turned out level first has no way left to go back (about x it only twists),
+    and SMPL's T-pose holds its arms 7 cm behind the default body's (its fit had left them
+    hanging, the nearest pose the search could reach)."""
     from engine.body.motion import _rot
 
     out = {}
     for side, sign in (("L", 1.0), ("R", -1.0)):
         t = turns[side]
-        up = _rot("x", t[1]) @ _rot("z", sign * t[0])
+        up = _rot("z", sign * t[0]) @ _rot("x", t[1])
         out[f"upperarm01.{side}"] = up
         # (a child's delta is in the rest frame, before its parent's turn: conjugated)
         out[f"lowerarm01.{side}"] = up.T @ _rot("x", t[3]) @ _rot("z", sign * t[2]) @ up
