@@ -1,8 +1,8 @@
-"""Patterns that GarmentCode's own generator writes (issue 47), as it writes them: six designs
+"""Patterns that GarmentCode's own generator writes (issue 47), as it writes them: seven designs
 drawn by ../shared/garmentcode/sample_designs.py (--body mean_female --seed 1; kept in
 tests/garmentcode/designs/, MIT, see its README) covering a waistband, pants with cuffs, a
-gathered skirt, a collar with skirt levels, a hood, and sleeves with a twelve-gore skirt. The
-default suite reads, checks and meshes them all and drapes two; the slow suite draws a fresh
+gathered skirt, a collar with skirt levels, a hood, a top on narrow straps, and sleeves with a
+twelve-gore skirt. The default suite reads, checks and meshes them all and drapes three; the slow suite draws a fresh
 seeded sample and drapes it (scripts/bench_garmentcode.py's bars)."""
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ def test_the_handful_covers_what_it_says():
     names = set().union(*(_panels(p) for p in FILES))
     for part in ("wb_front", "pant_l_cuff_f", "hood", "collar_front", "ins_skirt_front", "sleeve_f", "skirt_panel"):
         assert any(n.startswith(part) or part in n for n in names), part
-    assert len(FILES) == 6
+    assert len(FILES) == 7
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name[:17])
@@ -135,6 +135,40 @@ def test_a_waistband_and_a_gathered_skirt_drape_on_their_body(name):
 
     bench = _bench()
     row = bench.drape_one(DESIGNS / f"{name}_specification.json", resolve_body(str(BODY)), TryOnOptions())
+    assert row["ok"], row.get("error") or row.get("reason")
+
+
+def test_seams_placed_through_the_shoulders_are_raised_over_them():
+    """seam_lift: a seam whose straight closing path runs through the body above the armpits
+    raises the garment until it clears (plus a margin); one that clears already, one below the
+    armpits, and one that would need more than SEAM_LIFT_MAX (round the body, not over it) do not."""
+    from engine.garment.place import SEAM_LIFT_MARGIN, SEAM_LIFT_MAX, seam_lift
+
+    def inside(p):  # a shoulder: a ball of 10 cm radius round the origin
+        return np.linalg.norm(p, axis=1) < 0.1
+
+    def pair(y, z=0.2):
+        return np.array([[0.0, y, z], [0.0, y, -z]])
+
+    lift = seam_lift(pair(0.05), np.array([[0, 1]]), inside, above=0.0)
+    assert 0.1 - 0.05 <= lift - SEAM_LIFT_MARGIN <= 0.1 - 0.05 + 0.005
+    assert not inside(pair(0.05 + lift)).any()
+    assert seam_lift(pair(0.12), np.array([[0, 1]]), inside, above=0.0) == 0.0  # clears
+    assert seam_lift(pair(0.05), np.array([[0, 1]]), inside, above=0.08) == 0.0  # below the armpits
+    assert SEAM_LIFT_MAX < 0.1 + 0.05
+    assert seam_lift(pair(-0.05), np.array([[0, 1]]), inside, above=-1.0) == 0.0  # through the middle
+
+
+@pytest.mark.integration
+def test_a_top_on_narrow_straps_stays_on_the_shoulders():
+    """GarmentCode places a top's shoulder seams at its body's shoulder height, 3 cm inside the
+    shoulders beside the neck: pulled shut through them, its 1 cm straps slid off and the top fell
+    33 cm. Raised until the seams clear the shoulders, it drapes within the bars."""
+    from engine.body import resolve_body
+    from engine.scene.request import TryOnOptions
+
+    bench = _bench()
+    row = bench.drape_one(DESIGNS / "mean_female_1_021_specification.json", resolve_body(str(BODY)), TryOnOptions())
     assert row["ok"], row.get("error") or row.get("reason")
 
 

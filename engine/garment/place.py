@@ -655,6 +655,31 @@ def pattern_placement(spec, body: Body, inside=None):
     return place, CARRIED
 
 
+SEAM_LIFT_MAX = 0.10  # m: a garment is raised at most this far so that its seams close over the body ...
+SEAM_LIFT_STEP = 0.005  # ... found in these steps ...
+SEAM_LIFT_MARGIN = 0.01  # ... and raised this much further
+
+
+def seam_lift(positions: np.ndarray, seams: np.ndarray, inside, above: float) -> float:
+    """How far (m) to raise a placed garment so that every seam above height `above` (the
+    armpits) can close over the body: the straight path between each stitch's two sides,
+    which the sewing pulls them along, clear of the body (`inside`: points (N, 3) -> (N,) bool)
+    -- 0 when it is already, or when more than SEAM_LIFT_MAX would be needed (a seam round the
+    body, not over it). GarmentCode places a top's shoulder seams at its body's shoulder height,
+    a few cm under the surface of the shoulders beside the neck: pulled shut through the
+    shoulder, narrow straps slid off it and the top fell (raised 4 cm, such a top drapes)."""
+    a, b = positions[seams[:, 0]], positions[seams[:, 1]]
+    t = np.linspace(0.0, 1.0, 9)
+    path = a[:, None, :] * (1.0 - t)[None, :, None] + b[:, None, :] * t[None, :, None]  # (P, 9, 3)
+    path = path[path[:, :, 1].min(axis=1) > above].reshape(-1, 3)
+    if not len(path):
+        return 0.0
+    for dy in np.arange(0.0, SEAM_LIFT_MAX + 1e-9, SEAM_LIFT_STEP):
+        if not np.any(inside(path + np.array([0.0, dy, 0.0]))):
+            return 0.0 if dy == 0.0 else float(dy + SEAM_LIFT_MARGIN)
+    return 0.0
+
+
 def _clears(spec, own, inside, rel: bool) -> bool:
     """Whether the pattern's own layout lies round this body as GarmentCode lays it round the body
     it was made for: no more than CLEAR_INSIDE of its panels' points (outlines and a grid, 2 cm or coarser,

@@ -70,6 +70,27 @@ def plan_maps(body: Body, garment: Garment, texel: float, collision: str) -> Try
     return TryOnPlan(texel, window, segs, left)
 
 
+def _over_the_shoulders(garment, body: Body, inside, note: str | None) -> str | None:
+    """Raise a pattern file's placed garment until its seams above the armpits can close over
+    the body (engine.garment.place.seam_lift); returns the placement note, saying so."""
+    from engine.body.measure import measure
+    from engine.garment.place import seam_lift
+
+    try:
+        armpit = float(body.vertices[:, 1].min()) + float(measure(body).armpit_height)
+    except TryonError:
+        return note
+    if not np.isfinite(armpit):
+        return note
+    dy = seam_lift(garment.positions, garment.seams, inside, armpit)
+    if dy <= 0.0:
+        return note
+    garment.positions[:, 1] += dy
+    said = (f"raised {100 * dy:.1f} cm so that the seams over the shoulders close over them (as placed they "
+            "ran through the body)")
+    return f"{note}; {said}" if note else f"the pattern's own placement, {said}"
+
+
 def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOptions(), tuning: Tuning = Tuning(), *,
               place=None, source: str = "pattern", progress: Progress | None = None, observer=None,
               lift=None) -> tuple[DrapeResult, dict]:
@@ -108,6 +129,8 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
 
         place, placement_note = pattern_placement(spec, body, inside)
     garment = build_garment(spec, h=request.h, place=place, source=source)
+    if pattern_file:
+        placement_note = _over_the_shoulders(garment, body, inside, placement_note)
     plan = plan_maps(body, garment, request.texel, request.collision)
     t0 = time.perf_counter()
     progress("maps", 0.0, "rendering collision maps" if request.collision == "image" else "building the BVH")
