@@ -110,3 +110,27 @@ def test_smoothing_keeps_a_single_joint_and_blends_a_jump():
     w1 = np.where(s_idx == 1, s_w, 0.0).sum(axis=1)
     assert np.allclose(w1[v[:, 0] > 0.2 - 1e-9], w[v[:, 0] > 0.2 - 1e-9, 1], rtol=0, atol=1e-12)
     assert 0.0 < w1[nx // 2 - 1] < 0.5 and np.all(np.diff(w1[:nx]) >= -1e-12)
+
+
+def test_an_island_of_a_segment_takes_its_surroundings():
+    """mend_islands: a patch of one segment's labels lying apart from that segment's largest
+    piece (a hand's skin labelled thigh) takes the template vertex of the nearest vertex outside
+    it along the surface; each segment's largest piece keeps its own."""
+    from engine.body.fit import mend_islands
+
+    n = 12
+    x, y = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float))
+    v = np.stack([x.ravel(), y.ravel(), np.zeros(n * n)], axis=1)
+    idx = np.arange(n * n).reshape(n, n)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    faces = np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
+    labels = np.zeros(n * n, int)
+    labels[idx[:, 8:].ravel()] = 1  # segment 1: the right third
+    labels[idx[3:5, 2:4].ravel()] = 1  # ... and a 2 x 2 island of it inside segment 0
+    near = np.arange(n * n)  # each vertex its own template vertex
+    out = mend_islands(v, faces, labels, near)
+    island = idx[3:5, 2:4].ravel()
+    assert np.all(labels[out[island]] == 0)
+    assert np.all(np.abs(v[out[island]] - v[island]).sum(axis=1) <= 2.0)  # taken from next door
+    rest = np.setdiff1d(np.arange(n * n), island)
+    assert np.array_equal(out[rest], near[rest])
