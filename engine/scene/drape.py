@@ -270,6 +270,10 @@ def _pull(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSol
         if welded.all():
             break
         g = float(out.gaps[~welded].max())
+        if far and t.far_together:
+            # every open pair closes in the time the widest one needs: a dart or waist seam shut
+            # at once crumpled a fitted bodice while its shoulder seams were still 55 cm apart
+            control.sewing = sewing = replace(sewing, tau=max(t.tau, g / sewing.vmax))
         stall.append(g)
         if len(stall) == stall.maxlen and it >= snap_from and _stalled(out, stall, it, dt, t):
             break

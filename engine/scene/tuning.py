@@ -24,6 +24,7 @@ class SewTuning:
     damping: float = 20.0  # x the viscous damping while sewing (no flapping) ...
     far_damping: float = 1000.0  # ... or this for a flat layout, and for everything while calm_start lasts
     far_panel_damping: float = 0.0  # 1/s: a flat layout's panels damped toward their own mean motion
+    far_together: bool = True  # a flat layout's open pairs all close in the time its widest gap needs at vmax
     calm_start: float = 0.05  # s: the strain a placement leaves relaxes without flinging the cloth
     friction: float | None = None  # x the fabric's friction (None: 0, or more on a body whose arms hang close)
     gravity: float = 1.0  # x g while sewing (a flared skirt without gravity opens into a disc)
