@@ -501,7 +501,8 @@ def test_pull_seams_conserves_momentum_and_closes(masses):
     p0 = (mass[:, None] * v).sum(0)
     v0 = v.copy()
     tau, vmax = 0.5, 1.0
-    pull_seams(x, v, mass, pairs, welded, tau, vmax, np.zeros(n, np.bool_), np.zeros((n, 3)))
+    pull_seams(x, v, mass, pairs, welded, tau, vmax, np.zeros(n, np.bool_), np.zeros((n, 3)),
+               np.zeros((1, 3)), np.zeros(len(pairs), np.bool_))
     np.testing.assert_allclose((mass[:, None] * v).sum(0), p0, atol=1e-12)
     for a, b in pairs:
         d = x[b] - x[a]
@@ -510,8 +511,30 @@ def test_pull_seams_conserves_momentum_and_closes(masses):
         assert closing == pytest.approx(min(gap / tau, vmax), rel=1e-9)
     # a welded pair is left to hold_welds
     v = v0.copy()
-    pull_seams(x, v, mass, pairs, np.ones(len(pairs), np.bool_), tau, vmax, np.zeros(n, np.bool_), np.zeros((n, 3)))
+    pull_seams(x, v, mass, pairs, np.ones(len(pairs), np.bool_), tau, vmax, np.zeros(n, np.bool_), np.zeros((n, 3)),
+               np.zeros((1, 3)), np.zeros(len(pairs), np.bool_))
     np.testing.assert_array_equal(v, v0)
+
+
+def test_a_pair_with_a_meeting_point_is_pulled_to_it_not_to_each_other():
+    x = np.array([[0.0, 0.0, 0.1], [0.0, 0.0, -0.1]])
+    v = np.zeros((2, 3))
+    mass = np.full(2, 0.01)
+    pairs = np.array([[0, 1]], dtype=np.int32)
+    meet = np.array([[-0.1, 0.0, 0.0]])
+    tau, vmax = 0.5, 1.0
+    pull_seams(x, v, mass, pairs, np.zeros(1, np.bool_), tau, vmax, np.zeros(2, np.bool_), np.zeros((2, 3)),
+               meet, np.ones(1, np.bool_))
+    for end in (0, 1):
+        d = meet[0] - x[end]
+        np.testing.assert_allclose(v[end], d / tau, atol=1e-12)  # straight at the meeting point, gap / tau
+    # a seam end lying on the body is not pulled into it: the inward part of its pull is dropped
+    v = np.zeros((2, 3))
+    contact = np.array([True, False])
+    normal = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])  # the body's surface faces +x at vertex 0
+    pull_seams(x, v, mass, pairs, np.zeros(1, np.bool_), tau, vmax, contact, normal, meet, np.ones(1, np.bool_))
+    assert v[0, 0] == pytest.approx(0.0, abs=1e-12) and v[0, 2] < 0.0
+    assert v[1, 0] < 0.0
 
 
 # --- fabrics -------------------------------------------------------------------------------------------

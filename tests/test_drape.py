@@ -153,7 +153,8 @@ def test_flat_panels_whose_seams_stop_closing_are_sewn_again_gently():
 
 def test_a_stalled_flat_layout_is_sewn_again_within_half_a_second():
     """GarmentCode's T-shirt on its own body sews in one pull now that a flat layout's pairs close
-    together (SewTuning.far_together). Pulled each at 3 m/s as before, its sleeve seams stall ~9 cm
+    together (SewTuning.far_together), and so it does when the pairs whose path runs through the
+    arm meet beside it (SewTuning.meet_outside). Without either, each pulled at 3 m/s as before, its sleeve seams stall ~9 cm
     open from ~0.15 s on: with a second pull to come, the stall is judged over
     SewTuning.retry_stall windows, so it is sewn again after ~0.5 s of sewing, not after 1 s
     (progress reports come every 5 ms of simulated time while sewing), and then sews and drapes."""
@@ -165,13 +166,13 @@ def test_a_stalled_flat_layout_is_sewn_again_within_half_a_second():
 
     body = resolve_body(str(SAMPLE_BODY))
     spec, place, name = resolve_garment(str(GC_SHIRT), body, None)
-    for together in (True, False):
+    for together, meet in ((True, True), (False, True), (False, False)):
         said = []
         res, rep = run_tryon(body, spec, TryOnOptions(resolution_cm=3.0),
-                             replace(Tuning(), sew=replace(SewTuning(), far_together=together)), place=place,
-                             source=name, progress=lambda stage, f, msg: said.append((stage, msg)))
+                             replace(Tuning(), sew=replace(SewTuning(), far_together=together, meet_outside=meet)),
+                             place=place, source=name, progress=lambda stage, f, msg: said.append((stage, msg)))
         again = [k for k, (_, m) in enumerate(said) if "sewing again" in m]
-        if together:
+        if together or meet:  # either closes the sleeve seams in one pull (the pairs meet beside the arm)
             assert not again
         else:
             assert len(again) == 1
@@ -729,3 +730,40 @@ def test_collisions_are_checked_as_often_as_the_cloth_moves_far_enough():
                          source=name)
     ce = tight["collision_every_steps"]
     assert ce["draping"] == 2 and TIGHT_GRACE < ce["every_step_from_s"] <= TIGHT_GRACE + 0.0105, ce
+
+
+def test_a_seam_pair_straddling_a_leg_meets_on_the_side_its_edges_lie():
+    """An inseam placed across the middle of a leg: each pair's straight path runs through the leg
+    (front end in front of it, back end behind). It is to meet just outside the leg on the side its
+    edges lie on as placed (-x here, the inner side), not through the leg nor round the outer side."""
+    from types import SimpleNamespace
+
+    import trimesh
+
+    from engine.cloth.config import Sewing
+    from engine.collide.bvh import MeshBVH
+    from engine.scene.drape import _meet_beside
+
+    leg = trimesh.creation.cylinder(radius=0.06, height=0.6, sections=48)
+    leg.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))  # axis along y
+    body = MeshBVH(np.asarray(leg.vertices), np.asarray(leg.faces))
+    ys = np.linspace(-0.2, 0.2, 5)
+    front = np.stack([np.full(5, 0.01), ys, np.full(5, 0.12)], axis=1)  # just inner of the leg's axis
+    back = front * [1, 1, -1]
+    x = np.concatenate([front, back])
+    pairs = np.stack([np.arange(5), np.arange(5, 10)], axis=1)
+    sewing = Sewing(pairs, np.zeros(5, np.bool_), 0.02, 3.0, meet=np.zeros((5, 3)), meet_on=np.zeros(5, np.bool_))
+    # the panels' middles lie to +x of their inseams (the panels reach round the outer side)
+    job = SimpleNamespace(body=body, meet_side=np.tile([-0.15, 0.0, 0.0], (5, 1)), tuning=Tuning())
+    gaps = np.linalg.norm(back - front, axis=1)
+    _meet_beside(job, x, sewing, gaps, weld_gap=0.0075)
+    assert sewing.meet_on.all()
+    margin = Tuning().cloth.tolerance + Tuning().sew.meet_margin
+    np.testing.assert_allclose(sewing.meet[:, 0], -0.06 - margin, atol=0.004)  # just outside, inner side
+    np.testing.assert_allclose(sewing.meet[:, 1], ys, atol=1e-9)
+    assert np.all(body.signed_distance(sewing.meet) > 0.0)
+    # a pair whose midpoint is outside the body (its path clear of it) is pulled to its partner as before
+    x2 = x.copy()
+    x2[:, 0] = -0.3
+    _meet_beside(job, x2, sewing, gaps, weld_gap=0.0075)
+    assert not sewing.meet_on.any()

@@ -73,6 +73,15 @@ class Sewing:
     # middle (None: not); panel (N,) int64 the panel of each vertex
     panel: np.ndarray | None = None
     panel_damping: float = 0.0
+    # pairs whose straight path runs through the body: each end pulled to meet[k] instead (the
+    # scene sets both in place; engine.cloth.welds.pull_seams)
+    meet: np.ndarray | None = None  # (P, 3) float64
+    meet_on: np.ndarray | None = None  # (P,) bool
+
+    def meeting(self) -> tuple[np.ndarray, np.ndarray]:
+        if self.meet is None or self.meet_on is None:
+            return np.zeros((1, 3)), np.zeros(len(self.pairs), dtype=np.bool_)
+        return self.meet, self.meet_on
 
 
 @dataclass(frozen=True, eq=False)

@@ -55,8 +55,9 @@ def modify_velocities(model: ClothModel, state: ClothState, buf: StepBuffers, co
 def sew(model: ClothModel, state: ClothState, buf: StepBuffers, sewing: Sewing, dt: float) -> None:
     """The open seam pairs pulled shut (never into the body); a flat layout's panels then damped
     toward their own mean motion (Sewing.panel_damping)."""
+    meet, meet_on = sewing.meeting()
     pull_seams(state.x, state.v, model.mass, sewing.pairs, sewing.welded, sewing.tau, sewing.vmax, buf.contact,
-               buf.contact_n)
+               buf.contact_n, meet, meet_on)
     if sewing.panel is not None and sewing.panel_damping > 0.0:
         damp_about_panels(state.v, model.mass, sewing.panel, int(sewing.panel.max()) + 1,
                           float(np.exp(-sewing.panel_damping * dt)))

@@ -54,16 +54,39 @@ def merge_map(n: int, pairs: np.ndarray) -> np.ndarray:
 
 
 @serial_kernel(fastmath=False)
-def pull_seams(x, v, mass, pairs, welded, tau, vmax, contact, contact_n):
+def pull_seams(x, v, mass, pairs, welded, tau, vmax, contact, contact_n, meet, meet_on):
     """Sewing as a velocity modification (in the spirit of seed 003 §4.3): each open seam pair
     gets the relative velocity that closes its gap in time tau (at most vmax), shared so the
     pair's momentum is unchanged. A seam end lying on the body is not pulled into it: the part
     of its pull along the contact normal, if inward, is dropped, so pairs on either side of a
-    shoulder slide over it instead of pressing into it. Welded pairs are held by hold_welds."""
+    shoulder slide over it instead of pressing into it. Welded pairs are held by hold_welds.
+    A pair whose straight path runs through the body (meet_on[k]: the scene found its midpoint
+    inside) has each end pulled instead toward meet[k], a point just outside the body's surface
+    nearest that midpoint: straddling a leg or a shoulder, the ends go round it to the near side
+    instead of pressing into it from both sides."""
     for k in range(pairs.shape[0]):
         if welded[k]:
             continue
         a, b = pairs[k, 0], pairs[k, 1]
+        if meet_on[k]:
+            for end in (a, b):
+                dx = meet[k, 0] - x[end, 0]
+                dy = meet[k, 1] - x[end, 1]
+                dz = meet[k, 2] - x[end, 2]
+                d = np.sqrt(dx * dx + dy * dy + dz * dz)
+                if d < 1e-12:
+                    continue
+                ux, uy, uz = dx / d, dy / d, dz / d
+                speed = min(d / tau, vmax)
+                along = v[end, 0] * ux + v[end, 1] * uy + v[end, 2] * uz
+                if along >= speed:
+                    continue
+                dv = speed - along
+                px, py, pz = outward_only(dv * ux, dv * uy, dv * uz, end, contact, contact_n)
+                v[end, 0] += px
+                v[end, 1] += py
+                v[end, 2] += pz
+            continue
         wa = mass[b] / (mass[a] + mass[b])  # a moves by the other's mass share
         wb = mass[a] / (mass[a] + mass[b])
         dx = x[b, 0] - x[a, 0]

@@ -23,6 +23,7 @@ import math
 import time
 from collections import deque
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import Callable
 
 import numpy as np
@@ -42,6 +43,8 @@ from engine.scene.tuning import Tuning
 
 FELL_BELOW = -0.05  # m: cloth wholly below this height has fallen off the body (feet stand on y = 0)
 SETTLE_CHECKS = 5  # the settle test runs this many times a window (on the two windows just ended)
+MEET_STEPS = 12  # steps out of the body from a seam pair's midpoint (_meet_beside) ...
+MEET_EVERY = 4  # ... taken every this many gap checks (the body and the cloth move little between)
 GAP_CHECK = 0.005  # s: how often sewing measures its seams' gaps (and progress is reported)
 Progress = Callable[[str, float, str], None]  # (stage, fraction 0..1, message)
 # (stage, cloth positions (N, 3), triangles (F, 3), body vertices (M, 3) or None when unchanged):
@@ -112,6 +115,19 @@ class _Dressing:
     observer: Observer | None
     attachment: Attachment | None = None  # labelled edges held while sewing (engine.scene.attach)
     layered: bool = False  # with cloth-cloth contact (engine.scene.layers)
+    body: object = None  # the body's MeshBVH (seam pairs meeting beside it, SewTuning.meet_outside), or None
+
+    @cached_property
+    def meet_side(self) -> np.ndarray:
+        """(P, 3) each stitch pair's way out of the body (_meet_beside): from the middles of the two
+        panels to the pair's ends, as placed."""
+        g = self.garment
+        n = int(g.panel.max()) + 1
+        c = np.zeros((n, 3))
+        np.add.at(c, g.panel, g.positions)
+        c /= np.maximum(np.bincount(g.panel, minlength=n), 1)[:, None]
+        a, b = g.seams[:, 0], g.seams[:, 1]
+        return (g.positions[a] - c[g.panel[a]]) + (g.positions[b] - c[g.panel[b]])
 
     def solver(self, model: ClothModel) -> ClothSolver:
         return ClothSolver(model, self.collider, dressing_config(self.request, self.tuning, self.layered),
@@ -139,12 +155,13 @@ class _Sewn:
 
 def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOptions = TryOnOptions(),
                   tuning: Tuning = Tuning(), progress: Progress = _noop, observer: Observer | None = None,
-                  attachment: Attachment | None = None) -> DrapeResult:
+                  attachment: Attachment | None = None, body_bvh=None) -> DrapeResult:
     """Sew the placed panels, then drape them, against the same collider (module doc). attachment:
-    vertices held on planes while sewing and draping (engine.scene.attach)."""
+    vertices held on planes while sewing and draping (engine.scene.attach). body_bvh: the body's
+    MeshBVH (engine.collide.bvh), for seam pairs whose path runs through the body (None: not)."""
     tuning.validate()
     layered = needs_self_contact(garment, tuning)
-    job = _Dressing(garment, collider, request, tuning, progress, observer, attachment, layered[0])
+    job = _Dressing(garment, collider, request, tuning, progress, observer, attachment, layered[0], body_bvh)
     model = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
                         get_fabric(request.fabric), _edge(garment), tuning.cloth)
     state = job.fresh_state()
@@ -191,7 +208,9 @@ def _sew(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSolv
         control = Control(friction_scale=t.friction or 0.0, collide_every=_sew_every(job.tuning, dt, vmax),
                           sewing=Sewing(pairs, np.zeros(len(pairs), dtype=np.bool_), t.tau, vmax,
                                         panel=garment.panel.astype(np.int64) if far else None,
-                                        panel_damping=t.far_panel_damping),
+                                        panel_damping=t.far_panel_damping,
+                                        **(_meeting(len(pairs)) if far and t.meet_outside and job.body is not None
+                                           else {})),
                           attachment=job.attachment)
         pull = _pull(job, model, state, solver, control, far, retry=attempt + 1 < len(pulls), gap0=gap0)
         if pull.welded.all():
@@ -262,6 +281,8 @@ def _pull(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSol
         seam_gaps(state.x, pairs, out.gaps)
         if far:
             closed = max(closed, min(1.0, 1.0 - float(np.percentile(out.gaps, 90)) / max(p90_0, 1e-9)))
+        if sewing.meet is not None and (it // check_every) % MEET_EVERY == 0:
+            _meet_beside(job, state.x, sewing, out.gaps, weld_gap)
         new = ~welded & (out.gaps < weld_gap)
         if new.any():  # the largest gap a weld closed at once (the snap it makes)
             out.gap_max = max(out.gap_max, float(out.gaps[new].max()))
@@ -280,6 +301,50 @@ def _pull(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSol
         job.progress("sewing", min(1.0, 1.0 - g / max(gap0, 1e-9)), f"largest open seam gap {g * 100:.1f} cm")
     seam_gaps(state.x, pairs, out.gaps)
     return out
+
+
+def _meeting(n: int) -> dict:
+    return {"meet": np.zeros((n, 3)), "meet_on": np.zeros(n, dtype=np.bool_)}
+
+
+def _meet_beside(job: _Dressing, x: np.ndarray, sewing: Sewing, gaps: np.ndarray, weld_gap: float) -> None:
+    """Open pairs whose midpoint lies inside the body (their straight path runs through it: a leg
+    or a shoulder between the two ends) meet just outside the body on the side their edges lie
+    on: sewing.meet/meet_on set in place. From the midpoint, the way out is the direction from the
+    two panels' middles to the pair's ends as placed (an inseam lies on the inner side of its
+    leg's panels, a side seam at the side of the torso's, a shoulder seam at the top), square to
+    the gap; the surface is found by stepping along it by the distance to the body. A pair that
+    straddles a limb is otherwise pulled straight into it from both sides and stalls there, or
+    goes round the wrong side (a trouser leg twisted round its leg)."""
+    on = np.flatnonzero(~sewing.welded & (gaps > 2.0 * weld_gap))
+    sewing.meet_on[:] = False
+    if not len(on):
+        return
+    a, b = sewing.pairs[on, 0], sewing.pairs[on, 1]
+    mid = 0.5 * (x[a] + x[b])
+    sd = job.body.signed_distance(mid, max_distance=0.5)
+    inside = np.isfinite(sd) & (sd < 0.0)
+    if not inside.any():
+        return
+    on, a, b, mid, sd = on[inside], a[inside], b[inside], mid[inside], sd[inside]
+    gap = x[b] - x[a]
+    u = gap / np.maximum(np.linalg.norm(gap, axis=1), 1e-12)[:, None]
+    d = job.meet_side[on]
+    d = d - (d * u).sum(1)[:, None] * u
+    d /= np.maximum(np.linalg.norm(d, axis=1), 1e-12)[:, None]
+    t = np.zeros(len(on))
+    out = np.zeros(len(on), dtype=bool)
+    for _ in range(MEET_STEPS):
+        go = ~out
+        if not go.any():
+            break
+        t[go] += np.maximum(-sd[go], 0.003)
+        sd[go] = job.body.signed_distance(mid[go] + d[go] * t[go, None], max_distance=0.5)
+        out |= np.isfinite(sd) & (sd > 0.0)
+    if out.any():
+        k = on[out]
+        sewing.meet[k] = mid[out] + d[out] * (t[out] + job.tuning.cloth.tolerance + job.tuning.sew.meet_margin)[:, None]
+        sewing.meet_on[k] = True
 
 
 def _stalled(out: _Pull, stall: deque, it: int, dt: float, t) -> bool:

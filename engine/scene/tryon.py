@@ -146,7 +146,8 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     bvh = bvh_job.result()  # (done before the solver and its query helper thread start)
     held, held_note = attachment(garment, body)
     try:
-        res = sew_and_drape(garment, collider, request, tuning, progress, observer=observer, attachment=held)
+        res = sew_and_drape(garment, collider, request, tuning, progress, observer=observer, attachment=held,
+                            body_bvh=bvh if lift is None else None)
     except SimulationError as e:
         _carried_hint(e, placement_note, body)
         raise

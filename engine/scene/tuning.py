@@ -36,6 +36,8 @@ class SewTuning:
     snap_stall: float = 0.5  # ... (the widest gap shrank < 1 mm over this long) ...
     snap_gap: float = 0.02  # m: ... within this are welded where they are; wider, sewing gives up
     seam_flexion: bool = True  # bending springs across the sewn seams
+    meet_outside: bool = True  # a flat layout's pair whose path runs through the body meets beside it (pull_seams)
+    meet_margin: float = 0.01  # m: ... this far outside the body's surface nearest its midpoint
 
     def validate(self) -> None:
         if not (0.0 < self.check_travel <= 0.05):
