@@ -767,3 +767,29 @@ def test_a_seam_pair_straddling_a_leg_meets_on_the_side_its_edges_lie():
     x2[:, 0] = -0.3
     _meet_beside(job, x2, sewing, gaps, weld_gap=0.0075)
     assert not sewing.meet_on.any()
+
+
+def test_a_stall_beside_a_panel_stretched_far_past_the_fabric_names_that_panel():
+    """Sewing that stalls with a cuff's cloth stretched round the arm far past what the fabric
+    allows (a cuff cut smaller round than the limb it closes round) names the cuff as too small;
+    a panel only a little stretched, or stretched in a few springs, is not named."""
+    from types import SimpleNamespace
+
+    from engine.cloth.model import FLEXION, STRUCTURAL
+    from engine.scene.drape import _too_small_panels
+
+    n = 40  # two strips of 20 vertices (panels 0 and 1), each a chain of 19 springs
+    rest = np.full(38, 0.01)
+    springs = np.array([[i, i + 1] for i in range(19)] + [[i, i + 1] for i in range(20, 39)], dtype=np.int32)
+    x = np.zeros((n, 3))
+    x[:20, 0] = np.arange(20) * 0.01 * 1.40  # panel 0: every spring 40 % long
+    x[20:, 0] = np.arange(20) * 0.01 * 1.03  # panel 1: 3 %
+    x[30:, 0] += 0.01  # ... one spring 100 % long
+    garment = SimpleNamespace(panel=np.repeat([0, 1], 20), seams=np.array([[0, 20]]), panel_names=["cuff", "sleeve"])
+    job = SimpleNamespace(garment=garment, request=TryOnOptions(fabric="cotton"), tuning=Tuning())
+    model = SimpleNamespace(springs=np.concatenate([springs, [[0, 2]]]), rest=np.concatenate([rest, [0.02]]),
+                            kind=np.array([STRUCTURAL] * 38 + [FLEXION]))
+    said = _too_small_panels(job, model, SimpleNamespace(x=x), np.zeros(1, dtype=bool))
+    assert said is not None and "'cuff' 40 %" in said and "sleeve" not in said, said
+    x[:20, 0] = np.arange(20) * 0.01 * 1.05
+    assert _too_small_panels(job, model, SimpleNamespace(x=x), np.zeros(1, dtype=bool)) is None

@@ -1,8 +1,8 @@
-"""Patterns that GarmentCode's own generator writes (issue 47), as it writes them: eight designs
-drawn by ../shared/garmentcode/sample_designs.py (--body mean_female --seed 1; kept in
+"""Patterns that GarmentCode's own generator writes (issue 47), as it writes them: nine designs
+drawn by ../shared/garmentcode/sample_designs.py (--body mean_female --seed 1, and one of --seed 11; kept in
 tests/garmentcode/designs/, MIT, see its README) covering a waistband, a fitted dress, pants with cuffs, a
 gathered skirt, a collar with skirt levels, a hood, a top on narrow straps, and sleeves with a
-twelve-gore skirt. The default suite reads, checks and meshes them all and drapes four; the slow suite draws a fresh
+twelve-gore skirt, a strapless top cut with no ease. The default suite reads, checks and meshes them all and drapes five; the slow suite draws a fresh
 seeded sample and drapes it (scripts/bench_garmentcode.py's bars)."""
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ def test_the_handful_covers_what_it_says():
     names = set().union(*(_panels(p) for p in FILES))
     for part in ("wb_front", "pant_l_cuff_f", "hood", "collar_front", "ins_skirt_front", "sleeve_f", "skirt_panel"):
         assert any(n.startswith(part) or part in n for n in names), part
-    assert len(FILES) == 8
+    assert len(FILES) == 9
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name[:17])
@@ -194,6 +194,33 @@ def test_a_fitted_dress_sewn_from_its_flat_layout_stays_on_the_shoulders():
         x = e.positions
     shoulders = float(body.vertices[:, 1].min()) + measure(body).shoulder_height
     assert abs(float(x[:, 1].max()) - shoulders) < 0.06, (float(x[:, 1].max()), shoulders)
+
+
+@pytest.mark.integration
+def test_a_pattern_cut_with_no_ease_is_draped_in_a_knit():
+    """A strapless top GarmentCode cut to the body's own girth ends ~7 % stretched in cotton (5 %
+    allowed): it is a garment for a knit, and is draped again in jersey, the report saying why --
+    unless the user chose the fabric (theirs stands, with the tight warning)."""
+    from engine.body import resolve_body
+    from engine.errors import SimulationError
+    from engine.pattern.io import load_pattern
+    from engine.scene.request import TryOnOptions
+    from engine.scene.tryon import CLOSE_FIT_FABRIC, run_tryon
+
+    body = resolve_body(str(BODY))
+    spec = load_pattern(DESIGNS / "mean_female_11_013_specification.json")
+    said = []
+    res, rep = run_tryon(body, spec, progress=lambda stage, f, msg: said.append(msg))
+    assert rep["fabric"] == CLOSE_FIT_FABRIC
+    assert rep["fabric_why"].startswith("the pattern's fit: in cotton it ended"), rep["fabric_why"]
+    assert any(m.startswith("in cotton it ended") and "again in jersey" in m for m in said)
+    assert any(w.startswith("draped in jersey, a knit") for w in rep["warnings"])
+    assert not rep["tight"] and rep["settled"] and rep["penetration_mm"]["max"] <= 2.0
+    try:  # asked for cotton: cotton it is, reported tight (or refused as too small)
+        _, mine = run_tryon(body, spec, TryOnOptions(fabric="cotton"))
+        assert mine["fabric"] == "cotton" and mine["tight"], (mine["fabric"], mine["strain"])
+    except SimulationError as e:
+        assert "too small" in str(e), str(e)
 
 
 @pytest.mark.slow

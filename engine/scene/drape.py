@@ -379,13 +379,38 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
             f"stopped closing after {gave_up[0]:.1f} s of simulated time (the widest gap stayed "
             f"{100 * gave_up[1]:.1f}-{100 * gave_up[2]:.1f} cm for {t.snap_stall:.1f} s)")
     again = f" (sewn twice, pulled at {pulls[0]:g} and {pulls[-1]:g} m/s)" if len(pulls) > 1 else ""
-    err = SimulationError(f"sewing {when}{again}; open seams: {names}. The garment may be too small for "
-                          "this body (try a larger size) or the panels start too far apart")
+    small = _too_small_panels(job, model, state, welded)
+    why = (f"{small}: that part is too small for this body (try a larger size)" if small else
+           "The garment may be too small for this body (try a larger size) or the panels start too far apart")
+    err = SimulationError(f"sewing {when}{again}; open seams: {names}. {why}")
     err.positions, err.triangles = state.x.copy(), _triangles(model)  # for a picture
     err.too_small = True  # (engine.scene.garments.add_size_hint)
     # where the open seams were placed (engine.scene.garments.arms_in_the_way)
     err.open_top = float(garment.positions[garment.seams[~welded].ravel(), 1].max())
     return err
+
+
+def _too_small_panels(job: _Dressing, model: ClothModel, state: ClothState, welded: np.ndarray) -> str | None:
+    """The panels of the open seams whose cloth is stretched past the fabric's threshold +
+    DrapeTuning.too_tight over a tenth of it (90th percentile of its springs) while the seams
+    stall: a cuff or band smaller round than the limb it is to close round, named; else None."""
+    g = job.garment
+    limit = get_fabric(job.request.fabric).strain_threshold + job.tuning.drape.too_tight
+    s = model.springs[model.kind != FLEXION]
+    strain = np.linalg.norm(state.x[s[:, 1]] - state.x[s[:, 0]], axis=1) / model.rest[model.kind != FLEXION] - 1.0
+    found = []
+    for p in np.unique(g.panel[g.seams[~welded].ravel()]):
+        on = (g.panel[s[:, 0]] == p) & (g.panel[s[:, 1]] == p)
+        if on.sum() >= 10:
+            p90 = float(np.percentile(strain[on], 90))
+            if p90 > limit:
+                found.append((p90, g.panel_names[p]))
+    if not found:
+        return None
+    found.sort(reverse=True)
+    names = ", ".join(f"'{n}' {100 * v:.0f} %" for v, n in found[:4])
+    return (f"Beside them the cloth is stretched far past what {job.request.fabric} allows "
+            f"({100 * (limit - job.tuning.drape.too_tight):.0f} %) over a tenth of a panel or more: {names}")
 
 
 def drape(model: ClothModel, state: ClothState, collider: Collider | None, request: TryOnOptions = TryOnOptions(),
@@ -513,6 +538,7 @@ def _too_small(state: ClothState, model: ClothModel, strain: float, fabric, how:
     err.positions, err.triangles = state.x.copy(), _triangles(model)  # for a picture
     err.too_small = True  # (engine.scene.garments)
     err.stretched_at = most_stretched(state.x, model)[1]  # (engine.scene.garments.arms_in_the_way)
+    err.strain = strain
     return err
 
 

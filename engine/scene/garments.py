@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from engine.body.types import Body
@@ -144,7 +145,7 @@ def arms_in_the_way(err: Exception, body: Body) -> bool:
             f"below the armpits): the seams beside the arms are sewn reliably with the arms at least "
             f"{100 * ARM_GAP_OK:.0f} cm away there (an A-pose, arms about 45 degrees from the body)")
     if top is not None:
-        head = str(err).split(". The garment may be too small")[0]
+        head = re.split(r"\. (?:The garment may be too small|Beside them the cloth)", str(err))[0]
         err.args = (f"{head}. {pose}, and a larger size will not help. Scan the body in that pose, or try a "
                     "skirt or trousers",) + tuple(err.args[1:])
         err.too_small = False

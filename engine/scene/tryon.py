@@ -98,7 +98,54 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     place: the catalogue's placement function (None: the pattern's own, carried by landmarks).
     observer: see engine.scene.drape.Observer (the cloth as it is simulated, for a live view).
     lift: an engine.scene.arms.ArmLift of `body` -- sew and drape on its raised body (`place`
-    made for that body), then lower the arms and settle on `body`."""
+    made for that body), then lower the arms and settle on `body`.
+    A pattern file that names no fabric (nor was one asked for) is draped in DEFAULT_FABRIC; if
+    that leaves it stretched past the fabric's limit (tight, or refused as too small while
+    draping), it has no ease there -- a garment cut that close is sewn from a knit -- and it is
+    draped again in CLOSE_FIT_FABRIC, the report's fabric_why and a warning saying so. If the
+    knit does not fit either, the first drape (or its refusal) stands, noted."""
+    request, fabric_why = with_fabric(request, spec)
+    kw = dict(place=place, source=source, progress=progress, observer=observer, lift=lift)
+    if place is not None or fabric_why != "the default" or request.fabric == CLOSE_FIT_FABRIC:
+        return _run_tryon(body, spec, request, tuning, fabric_why, **kw)
+    fab = get_fabric(request.fabric)
+    try:
+        first = _run_tryon(body, spec, request, tuning, fabric_why, **kw)
+    except SimulationError as e:
+        if getattr(e, "stretched_at", None) is None:  # (sewing that stalled is not a fit)
+            raise
+        first, strain = e, getattr(e, "strain", None)
+    else:
+        if not first[1]["tight"]:
+            return first
+        strain = first[1]["strain"]["max"]
+    how = f"{100 * strain:.0f} % stretched" if strain is not None else "too stretched"
+    knit = get_fabric(CLOSE_FIT_FABRIC)
+    said = f"in {fab.name} it ended {how} where {fab.name} allows {100 * fab.strain_threshold:.0f} %"
+    why = (f"the pattern's fit: {said}: cut with no ease there, it is a garment for a knit (choose the fabric "
+           f"{fab.name} to see it in {fab.name})")
+    (progress or (lambda *a: None))("sewing", 0.0, f"{said}: draping it again in {knit.name}, a knit")
+    try:
+        res, rep = _run_tryon(body, spec, request.model_copy(update={"fabric": knit.name}), tuning, why, **kw)
+    except SimulationError as e:
+        if isinstance(first, Exception):
+            first.args = (f"{first} (in {knit.name} too: {e})",) + tuple(first.args[1:])
+            raise first
+        first[1]["warnings"].append(f"draped again in {knit.name}, a knit, it failed ({e}): this is the drape in "
+                                    f"{fab.name}")
+        return first
+    if rep["tight"] and not isinstance(first, Exception):
+        first[1]["warnings"].append(f"in {knit.name}, a knit, it is tight too (stretched "
+                                    f"{100 * rep['strain']['max']:.0f} %): this is the drape in {fab.name}")
+        return first
+    rep["warnings"].append(f"draped in {knit.name}, a knit: {said}")
+    return res, rep
+
+
+def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tuning, fabric_why: str, *,
+               place=None, source: str = "pattern", progress: Progress | None = None, observer=None,
+               lift=None) -> tuple[DrapeResult, dict]:
+    """run_tryon in the request's fabric (named, and why)."""
     from engine.collide.bvh import MeshBVH, penetration_stats
 
     progress = progress or (lambda *a: None)
@@ -106,7 +153,6 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
         raise InputError("dressing with the arms raised and lowering them needs the image-space collision "
                          "(--collision image)")
     loaded, body = body, (lift.raised if lift is not None else body)  # the body sewn and draped on
-    request, fabric_why = with_fabric(request, spec)
     fab = get_fabric(request.fabric)
     sew_note = None
     if tuning.sew.friction is None:
@@ -337,6 +383,7 @@ TOP_DROP = 0.10  # m: a garment whose top ends this far below where it was place
 SLID_OFF = 0.25
 HEM_RISE = 0.15  # m: ... whose lowest point ends this far above its placed height bunched up
 TIGHT = 0.01  # a drape stretched past the fabric's threshold by more than this is reported tight
+CLOSE_FIT_FABRIC = "jersey"  # a pattern file too tight for the default fabric is draped again in this knit
 # (issue 3's quality limit; the strain guard holds a garment that fits at threshold + 0.9 %)
 
 
