@@ -793,3 +793,31 @@ def test_a_stall_beside_a_panel_stretched_far_past_the_fabric_names_that_panel()
     assert said is not None and "'cuff' 40 %" in said and "sleeve" not in said, said
     x[:20, 0] = np.arange(20) * 0.01 * 1.05
     assert _too_small_panels(job, model, SimpleNamespace(x=x), np.zeros(1, dtype=bool)) is None
+
+
+def test_a_panel_that_rose_into_place_hanging_full_length_is_not_bunched_up():
+    """GarmentCode stacks a jumpsuit's trousers below its bodice in the flat layout: they rise
+    15-50 cm into place, hanging their full length. A risen hem is called bunched up only where a
+    panel placed at least PANEL_TALL tall also hangs shorter than BUNCHED of that height."""
+    from types import SimpleNamespace
+
+    from engine.scene.tryon import BUNCHED, hang_shift, hang_warnings, shortest_panel
+
+    y = np.linspace(0.0, 1.0, 11)
+    placed = np.column_stack([np.zeros(22), np.concatenate([y - 0.5, y + 0.5]), np.zeros(22)])  # legs, bodice
+    garment = SimpleNamespace(positions=placed, panel=np.repeat([0, 1], 11), panel_names=["pant", "bodice"])
+    risen = placed.copy()
+    risen[:11, 1] += 0.3  # the trousers rose 30 cm into place, full length
+    res = SimpleNamespace(positions=risen, vertex_map=np.arange(22))
+    shrunk = shortest_panel(garment, res)
+    assert shrunk[0] == pytest.approx(1.0)
+    assert hang_warnings(hang_shift(placed, risen), None, shrunk) == []
+    heaped = risen.copy()
+    heaped[:11, 1] = 0.5 + 0.3 * (heaped[:11, 1] - 0.5) / 1.0  # ... and crumpled to 30 cm tall
+    shrunk = shortest_panel(garment, SimpleNamespace(positions=heaped, vertex_map=np.arange(22)))
+    assert shrunk[1] == "pant" and shrunk[0] < BUNCHED
+    said = hang_warnings(hang_shift(placed, heaped), None, shrunk)
+    assert len(said) == 1 and "bunched up" in said[0] and "panel 'pant' hangs 30 cm tall, placed 100 cm" in said[0]
+    # without a map from the garment's vertices the risen hem alone says so (as before)
+    assert shortest_panel(garment, SimpleNamespace(positions=risen, vertex_map=None)) is None
+    assert "bunched up" in hang_warnings(hang_shift(placed, risen))[0]

@@ -171,6 +171,7 @@ def lower_arms(lift: ArmLift, res: DrapeResult, request: TryOnOptions, tuning: T
                           "cloth_total": res.timing["cloth_total"] + walk_cloth_s + settle_cloth,
                           "collision_total": res.timing["collision_total"] + walk_coll_s + settle_coll},
                   seam_gap_max=res.seam_gap_max, snapped=res.snapped, spec=res.spec, self_contact=res.self_contact,
+                  vertex_map=res.vertex_map,
                   collide_every={**res.collide_every, "lowering_arms": w["collision_every_steps"],
                                  "settling": settled.collide_every["draping"]},
                   lowering={"strain_max": float(w["strain_max"]), "penetration_mm": w["penetration_mm"],

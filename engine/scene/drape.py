@@ -80,6 +80,7 @@ class DrapeResult:
     lowering: dict | None = None  # dressed with the arms raised: the lowering's figures (engine.scene.arms)
     collide_every: dict = field(default_factory=dict)  # steps between collision checks by stage
     self_contact: tuple[bool, str] = (False, "")  # cloth-cloth contact: on, and why (engine.scene.layers)
+    vertex_map: np.ndarray | None = None  # (N unsewn,) each garment vertex's index in positions (None: not sewn)
 
 
 def _noop(stage: str, fraction: float, message: str) -> None:
@@ -151,6 +152,7 @@ class _Sewn:
     gravity: float  # the gravity scale sewing ended with
     every: int  # steps between collision checks
     attachment: Attachment | None  # on the welded cloth
+    vertex_map: np.ndarray  # (N unsewn,) -> welded vertex
 
 
 def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOptions = TryOnOptions(),
@@ -183,6 +185,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOpt
     if sewn is not None:
         res.seam_gap_max, res.snapped = sewn.gap_max, sewn.snapped
         res.collide_every = {"sewing": sewn.every, **res.collide_every}
+        res.vertex_map = sewn.vertex_map
     res.self_contact = layered
     return res
 
@@ -232,7 +235,7 @@ def _sew(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSolv
     state = ClothState(x_new / w[:, None], v_new / w[:, None])
     return _Sewn(model=model, state=state, solver=job.solver(model), iterations=its, timing=timing,
                  gap_max=pull.gap_max, snapped=pull.snapped, gravity=pull.gravity, every=int(control.collide_every),
-                 attachment=welded(job.attachment, vmap))
+                 attachment=welded(job.attachment, vmap), vertex_map=vmap)
 
 
 @dataclass

@@ -207,6 +207,7 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
         res = lower_arms(lift, res, request, tuning, plan_l, progress=progress, observer=observer)
         body = loaded
     shift = hang_shift(garment.positions, res.positions)
+    shrunk = shortest_panel(garment, res)
     if shift["top"] < -SLID_OFF:  # settled, but not on the body: never written as a result
         raise _slid(body, res, shift, placement_note, crossing_hint(garment))
     pen = penetration_stats(body.vertices, body.faces, res.positions, bvh=bvh)
@@ -247,7 +248,7 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
         "sew_friction": {"scale": float(tuning.sew.friction),
                          "why": sew_note or ("asked for" if tuning.sew.friction else "the panels slide into place")},
         "tight": bool(res.strain_max > fab.strain_threshold + TIGHT),
-        "warnings": garment.warnings + hang_warnings(shift, crossing_hint(garment)) + fit_warnings(res.strain_max, fab, res.settled,
+        "warnings": garment.warnings + hang_warnings(shift, crossing_hint(garment), shrunk) + fit_warnings(res.strain_max, fab, res.settled,
                                                                            tuning.drape.budget, pattern_file),
     }
     if lift is not None:
@@ -381,10 +382,12 @@ def sewing_friction(body: Body, fabric=None) -> tuple[float, str | None]:
 TOP_DROP = 0.10  # m: a garment whose top ends this far below where it was placed slid down the body
 # m: ... and this far, it came off it: an error, not a result (it may meet every other bar)
 SLID_OFF = 0.25
-HEM_RISE = 0.15  # m: ... whose lowest point ends this far above its placed height bunched up
+HEM_RISE = 0.15  # m: ... whose lowest point ends this far above its placed height bunched up ...
+PANEL_TALL = 0.15  # m: ... where a panel placed at least this tall ...
+BUNCHED = 0.6  # ... hangs shorter than this share of its placed height (hang_warnings)
 TIGHT = 0.01  # a drape stretched past the fabric's threshold by more than this is reported tight
-CLOSE_FIT_FABRIC = "jersey"  # a pattern file too tight for the default fabric is draped again in this knit
 # (issue 3's quality limit; the strain guard holds a garment that fits at threshold + 0.9 %)
+CLOSE_FIT_FABRIC = "jersey"  # a pattern file too tight for the default fabric is draped again in this knit
 
 
 def fit_warnings(strain: float, fabric, settled: bool, budget: float, pattern_file: bool = False) -> list[str]:
@@ -421,14 +424,42 @@ def sharp_folds(positions: np.ndarray, triangles: np.ndarray, degrees: float = 1
     return {"count": int((angles > np.radians(degrees)).sum()), "edges": int(len(angles)), "degrees": degrees}
 
 
-def hang_warnings(shift: dict[str, float], crossing: str | None = None) -> list[str]:
-    """What a drape that ended off where it was placed says; crossing: crossing_hint's, said with it."""
+def shortest_panel(garment: Garment, res: DrapeResult) -> tuple[float, str, float, float] | None:
+    """Of the panels placed at least PANEL_TALL tall, the one whose drape is shortest for its
+    placed height: (draped / placed height, its name, draped m, placed m); None when no panel is
+    that tall or the drape has no map from the garment's vertices."""
+    vmap = res.vertex_map
+    if vmap is None or len(vmap) != len(garment.positions):
+        return None
+    best = None
+    y0, y1 = garment.positions[:, 1], res.positions[vmap, 1]
+    for p, name in enumerate(garment.panel_names):
+        on = garment.panel == p
+        if not on.any():
+            continue
+        placed = float(np.ptp(y0[on]))
+        if placed < PANEL_TALL:
+            continue
+        ratio = float(np.ptp(y1[on])) / placed
+        if best is None or ratio < best[0]:
+            best = (ratio, name, float(np.ptp(y1[on])), placed)
+    return best
+
+
+def hang_warnings(shift: dict[str, float], crossing: str | None = None,
+                  shrunk: tuple[float, str, float, float] | None = None) -> list[str]:
+    """What a drape that ended off where it was placed says; crossing: crossing_hint's, said with it.
+    shrunk: shortest_panel's; a risen hem is bunching only where a panel also hangs shorter than
+    BUNCHED of its placed height (GarmentCode stacks a jumpsuit's trousers below its bodice in the
+    layout: they rise into place, hanging full length); None: the risen hem alone says so."""
     out = []
     if shift["top"] < -TOP_DROP:
         out.append(f"the garment slid {-100 * shift['top']:.0f} cm down the body from where it was placed: "
                    "it may be too large for this body (try a smaller size)")
-    if shift["hem"] > HEM_RISE:
-        out.append(f"the garment's lowest point rose {100 * shift['hem']:.0f} cm from where it was placed: "
+    if shift["hem"] > HEM_RISE and (shrunk is None or shrunk[0] < BUNCHED):
+        panel = (f"; panel '{shrunk[1]}' hangs {100 * shrunk[2]:.0f} cm tall, placed {100 * shrunk[3]:.0f} cm"
+                 if shrunk is not None else "")
+        out.append(f"the garment's lowest point rose {100 * shift['hem']:.0f} cm from where it was placed{panel}: "
                    "it bunched up instead of hanging (look at the pictures)")
     if out and crossing:
         out[0] += f" ({crossing})"
