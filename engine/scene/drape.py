@@ -351,12 +351,15 @@ def _meet_beside(job: _Dressing, x: np.ndarray, sewing: Sewing, gaps: np.ndarray
 
 
 def _stalled(out: _Pull, stall: deque, it: int, dt: float, t) -> bool:
-    """Whether the seams stopped closing (the widest gap shrank < 1 mm from the older half of the
-    stall window to the recent one): welded where they are if within snap_gap (now and in the
-    median, a swaying pair included), else given up (out.gave_up)."""
+    """Whether the seams stopped closing (the widest gap's median shrank < 1 mm from the older half
+    of the stall window to the recent one; its median, not its least: a gap swinging 1.7-3 cm
+    for seconds has a new least now and then without closing): welded where they are if within
+    snap_gap (now and in the median, a swaying pair included), given up (out.gave_up) where the
+    median is wider (a gap swinging about snap_gap, neither, had sewn on to the end of the budget:
+    minutes of wall time under cloth-cloth contact)."""
     h = len(stall) // 2
     older, recent = list(stall)[:h], list(stall)[h:]
-    if min(older) - min(recent) >= 0.001:
+    if np.median(older) - np.median(recent) >= 0.001:
         return False
     g = stall[-1]
     if g <= t.snap_gap and np.median(recent) <= t.snap_gap:
@@ -364,7 +367,7 @@ def _stalled(out: _Pull, stall: deque, it: int, dt: float, t) -> bool:
         out.gap_max = max(out.gap_max, g)
         out.welded[:] = True
         return True
-    if min(recent) > t.snap_gap:
+    if np.median(recent) > t.snap_gap:
         out.gave_up = ((it + 1) * dt, min(recent), max(recent))
         return True
     return False
