@@ -95,7 +95,7 @@ def test_gathered_seams_pair_their_edges_evenly():
         for s, st in enumerate(spec.pattern.stitches):
             la = geo.edge_length(panels[st.a.panel], panels[st.a.panel].edges[st.a.edge], scale, rel)
             lb = geo.edge_length(panels[st.b.panel], panels[st.b.panel].edges[st.b.edge], scale, rel)
-            if max(la, lb) < 1.3 * min(la, lb):
+            if max(la, lb) < 1.3 * min(la, lb) or min(la, lb) < 0.02:  # (a millimetre edge is a corner, not a gather)
                 continue
             gathered += 1
             pairs = g.seams[g.seam_id == s]
