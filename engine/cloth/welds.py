@@ -61,9 +61,9 @@ def pull_seams(x, v, mass, pairs, welded, tau, vmax, contact, contact_n, meet, m
     of its pull along the contact normal, if inward, is dropped, so pairs on either side of a
     shoulder slide over it instead of pressing into it. Welded pairs are held by hold_welds.
     A pair whose straight path runs through the body (meet_on[k]: the scene found its midpoint
-    inside) has each end pulled instead toward meet[k], a point just outside the body's surface
-    nearest that midpoint: straddling a leg or a shoulder, the ends go round it to the near side
-    instead of pressing into it from both sides."""
+    inside) has each end pulled instead toward meet[k], a point just outside the body on the side
+    its edges lie on (engine.scene.drape._meet_beside): straddling a leg or a shoulder, the ends
+    go round it to that side instead of pressing into it from both sides."""
     for k in range(pairs.shape[0]):
         if welded[k]:
             continue
