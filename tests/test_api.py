@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 
 import pytest
@@ -471,6 +472,33 @@ def test_cancel_and_delete_running(tmp_path):
                     headers=h).json()["id"]
         assert wait(c, h, c2, timeout=120)["status"] == "done"
         assert not (c.app.state.settings.data_dir / "jobs" / b).exists()
+
+
+def test_a_job_deleted_while_its_results_are_written_leaves_no_folder(tmp_path, monkeypatch):
+    """The delete lands after the last progress check, while the worker writes its results (its
+    mkdir makes the removed folder again): the worker removes it once it finds the job gone."""
+    from app import crud
+    from app.queue import worker
+    from app.services import tryons
+
+    settings = _settings(tmp_path)
+    with TestClient(create_app(settings, start_workers=False)) as c:
+        h = token(c)
+        jid = c.post("/api/tryons", json={"body": "default:female", "garment": "skirt"}, headers=h).json()["id"]
+        db = c.app.state.db
+        job = crud.claim(db, os.getpid(), 30.0)
+        assert job["id"] == jid
+
+        def run(req, out, progress, live=None):
+            tryons.delete(crud.get(db, "jobs", jid), settings, db)  # the user deletes it now
+            out.mkdir(parents=True)
+            (out / "garment.glb").write_bytes(b"x" * 100)
+            return {"ok": True}
+
+        monkeypatch.setattr(worker, "_run", run)
+        worker.run_job(db, job, settings.data_dir)
+        assert crud.get(db, "jobs", jid) is None
+        assert not (settings.data_dir / "jobs" / jid).exists()
 
 
 def test_worker_warm_up_loads_the_engine_and_never_raises(monkeypatch, capsys):

@@ -27,7 +27,7 @@ from pathlib import Path
 from app import crud
 from app.core.config import Settings
 from app.core.db import DB
-from app.queue.results import attempt_dir
+from app.queue.results import attempt_dir, job_dir
 
 
 STOP = threading.Event()  # set by SIGTERM: finish the step, give the job back, exit
@@ -170,11 +170,20 @@ def run_job(db: DB, job: dict, data_dir: Path, lease: float = 30.0) -> None:
     except Exception as e:
         shutil.rmtree(part, ignore_errors=True)
         _record_failure(db, jid, attempt, e)
+        _drop_if_deleted(db, data_dir, jid)
         return
     finally:
         beat.stop()
     if not crud.finish(db, jid, attempt, "done", None, report, final.name):
         shutil.rmtree(final, ignore_errors=True)  # cancelled, deleted or requeued meanwhile: not ours
+        _drop_if_deleted(db, data_dir, jid)
+
+
+def _drop_if_deleted(db: DB, data_dir: Path, jid: str) -> None:
+    """A job deleted while it ran: the API removed its folder, but writing results after that
+    made it again -- remove it, so nothing of a deleted job stays on disk."""
+    if db.one("SELECT 1 FROM jobs WHERE id=?", jid) is None:
+        shutil.rmtree(job_dir(data_dir, jid), ignore_errors=True)
 
 
 def _record_failure(db: DB, jid: str, attempt: int, e: Exception) -> None:
