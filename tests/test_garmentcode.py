@@ -78,6 +78,51 @@ def test_a_collar_keeps_its_sewing_side():
     assert sides == written
 
 
+def _starts_at(g, spec, side, pairs) -> bool:
+    """Whether a stitch side's first pair lies at its edge's first end (in the panel's plane)."""
+    panel = spec.pattern.panels[side.panel]
+    start = np.array(panel.vertices[panel.edges[side.edge].endpoints[0]]) * spec.scale
+    d = np.linalg.norm(g.uv[pairs[[0, -1]]] - start, axis=1)
+    return bool(d[0] < d[1])
+
+
+def test_stitched_edges_pair_head_to_tail_as_garmentcode_sews_them():
+    """GarmentCode sews a stitch's edges head to tail (right side to right side) and a "right_wrong"
+    stitch the same way round -- whatever the flat layout suggests: a waist edge curled round the
+    body or a hood's neckline can lie closer the other way round (1_019's hood, 1_022's sleeves were
+    paired wrongly by nearness and twisted their seams). A DXF import's stitches (pairing
+    "placed") pair the way their ends lie closer."""
+    from engine.garment.garment import build_garment
+    from engine.pattern.io import load_pattern
+    from engine.pattern.spec import PatternSpec
+
+    sided = 0
+    for path in FILES:
+        spec = load_pattern(path)
+        g = build_garment(spec, h=0.015)
+        for s, st in enumerate(spec.pattern.stitches):
+            pairs = g.seams[g.seam_id == s]
+            if len(pairs) < 2:
+                continue
+            same_way = _starts_at(g, spec, st.a, pairs[:, 0]) == _starts_at(g, spec, st.b, pairs[:, 1])
+            assert same_way == (st.side == "right_wrong"), (path.name, g.stitch_names[s])
+            sided += st.side == "right_wrong"
+    assert sided >= 2
+
+    # b placed upside down above a: its edge 3 lies nearer a's edge 1 the same way round
+    square = {"vertices": [[0, 0], [30, 0], [30, 40], [0, 40]], "edges": [{"endpoints": [i, (i + 1) % 4]} for i in range(4)]}
+    doc = {"pattern": {"panels": {"a": {**square, "translation": [0, 0, 0]},
+                                  "b": {**square, "translation": [31, 40, 0], "rotation": [0, 0, 180]}},
+                       "stitches": [[{"panel": "a", "edge": 1}, {"panel": "b", "edge": 3}]]}}
+    for pairing, want_same in ((None, False), ("placed", True)):
+        spec = PatternSpec.model_validate({**doc, "tryon": {"pairing": pairing}})
+        g = build_garment(spec, h=0.05)
+        pairs = g.seams
+        same_way = _starts_at(g, spec, spec.pattern.stitches[0].a, pairs[:, 0]) == \
+            _starts_at(g, spec, spec.pattern.stitches[0].b, pairs[:, 1])
+        assert same_way == want_same, pairing
+
+
 def test_gathered_seams_pair_their_edges_evenly():
     """Edges of different lengths sewn together (a trouser leg gathered into its cuff, a skirt into
     a bodice): each pair lies at the same share of both edges' lengths -- the longer edge

@@ -125,14 +125,20 @@ def build_garment(spec: PatternSpec, h: float = 0.015, place: Placement | None =
         raise InputError(f"{source}: panel placement produced non-finite positions")
 
     seams, seam_id, stitch_names = [], [], []
-    for s, (a, b) in enumerate(spec.pattern.stitches):
+    placed = spec.tryon is not None and spec.tryon.pairing == "placed"
+    for s, st in enumerate(spec.pattern.stitches):
+        a, b = st
         va = meshes[a.panel].edge_vertices[a.edge] + offset[a.panel]
         vb = meshes[b.panel].edge_vertices[b.edge] + offset[b.panel]
-        # GarmentCode sews edges head to tail; check against the 3D placement and take the
-        # pairing whose ends are closer (specs written either way then both work)
-        same = np.linalg.norm(positions[va[[0, -1]]] - positions[vb[[0, -1]]], axis=1).sum()
-        flip = np.linalg.norm(positions[va[[0, -1]]] - positions[vb[[-1, 0]]], axis=1).sum()
-        if flip <= same:
+        if placed:  # take the pairing whose ends lie closer as placed
+            same = np.linalg.norm(positions[va[[0, -1]]] - positions[vb[[0, -1]]], axis=1).sum()
+            flip = np.linalg.norm(positions[va[[0, -1]]] - positions[vb[[-1, 0]]], axis=1).sum()
+            if flip <= same:
+                vb = vb[::-1]
+        elif st.side != "right_wrong":
+            # GarmentCode's rule: edges sewn head to tail (right side to right side), one of them
+            # turned over ("right_wrong") in the same direction. The placement cannot decide it:
+            # a short edge curled round a waist or a hood's neckline lies either way round.
             vb = vb[::-1]
         seams.append(np.stack([va, vb], axis=1))
         seam_id.append(np.full(len(va), s, dtype=np.int32))

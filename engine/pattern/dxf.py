@@ -422,7 +422,8 @@ def _placed_import(pattern: DxfPattern, size: str, asm: Assembly) -> tuple[Patte
         "pattern": {"panels": panels, "stitches": [[a.model_dump(), b.model_dump()] for a, b in asm.stitches],
                     "panel_order": _order(asm.panel_order, panels)},
         "properties": {"units_in_meter": 100, "curvature_coords": "relative"},
-        **({"tryon": asm.tryon.model_dump(exclude_none=True)} if asm.tryon is not None else {}),
+        # mirrored copies wind the other way: their stitches pair up as placed (TryonExtension.pairing)
+        "tryon": {"pairing": "placed", **(asm.tryon.model_dump(exclude_none=True) if asm.tryon is not None else {})},
     })
     return spec, notes
 

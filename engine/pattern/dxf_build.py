@@ -296,7 +296,7 @@ def build_spec(parts: list[Part], seams: list[Seam], hints: dict[str, PanelHint]
             for x, y in zip(ea, eb):
                 stitches.append([{"panel": seam.a.part, "edge": x}, {"panel": seam.b.part, "edge": y}])
                 labels.append(seam.label)
-    tryon = {"placement": {k: v.model_dump(exclude_none=True) for k, v in hints.items()}}
+    tryon = {"placement": {k: v.model_dump(exclude_none=True) for k, v in hints.items()}, "pairing": "placed"}
     if fabric:
         tryon["fabric"] = fabric
     spec = PatternSpec.model_validate({

@@ -163,6 +163,10 @@ class TryonExtension(BaseModel):
     fabric_why: str | None = None  # why the pattern has this fabric (a DXF's suggestion: engine.pattern.dxf_fabric)
     placement: dict[str, PanelHint] = Field(default_factory=dict)
     made_for_body: str | None = None  # a body name/file the spec's own placement fits
+    # how stitched edges pair up: GarmentCode's rule (None: head to tail, "right_wrong" stitches
+    # the same way), or "placed": the way round whose ends lie closer as placed (the DXF importer's
+    # stitches, whose edges' directions follow the cut pieces, some of them mirrored)
+    pairing: Literal["placed"] | None = None
 
 
 class PatternSpec(BaseModel):
