@@ -443,6 +443,30 @@ def test_a_drape_that_stays_stretched_is_refused_early():
     assert e.value.too_small and e.value.positions.shape[1] == 3
 
 
+@pytest.mark.integration
+def test_a_drape_another_fabric_follows_gives_up_as_soon_as_it_stays_tight():
+    """DrapeTuning.give_up (set by run_tryon when a knit follows a pattern's default cotton): the
+    drape stops once it stayed past the threshold + knit_give_up for knit_give_up_after -- marked
+    gave_up, so the knit is tried at once and the full drape in cotton only if the knit fails too.
+    Off, the same drape runs on. Here with the bar lowered to 1 % on the coarse M skirt (5-6 %)."""
+    from engine.body.default import default_body
+    from engine.errors import SimulationError
+    from engine.scene.garments import resolve_garment
+    from engine.scene.tryon import run_tryon
+
+    body = default_body("female")
+    spec, place, name = resolve_garment("skirt", body, "M")
+    low = dict(knit_give_up=-0.04, knit_give_up_after=0.1, min_time=0.1)
+    with pytest.raises(SimulationError, match=r"too small for this body: for 0.10 s of draping it stayed "
+                                              r"stretched at least \d+ % where cotton allows 5 %") as e:
+        run_tryon(body, spec, TryOnOptions(resolution_cm=3.0), Tuning(drape=DrapeTuning(give_up=True, **low)),
+                  place=place, source=name)
+    assert e.value.gave_up and e.value.too_small
+    _, rep = run_tryon(body, spec, TryOnOptions(resolution_cm=3.0), Tuning(drape=DrapeTuning(**low)),
+                       place=place, source=name)
+    assert rep["settled"]
+
+
 @pytest.mark.slow
 def test_a_dress_on_a_scan_with_the_arms_closer_is_sewn_with_friction(tmp_path):
     """default:female as a scan with its arms lowered 20 degrees (5.4 cm from the torso 10 cm

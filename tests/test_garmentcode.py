@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -257,8 +258,9 @@ def test_a_pattern_cut_with_no_ease_is_draped_in_a_knit():
     said = []
     res, rep = run_tryon(body, spec, progress=lambda stage, f, msg: said.append(msg))
     assert rep["fabric"] == CLOSE_FIT_FABRIC
-    assert rep["fabric_why"].startswith("the pattern's fit: in cotton it ended"), rep["fabric_why"]
-    assert any(m.startswith("in cotton it ended") and "again in jersey" in m for m in said)
+    assert re.match(r"the pattern's fit: in cotton it (ended|stayed) \d+ % stretched", rep["fabric_why"]), \
+        rep["fabric_why"]
+    assert any(re.match("in cotton it (ended|stayed)", m) and "again in jersey" in m for m in said)
     assert any(w.startswith("draped in jersey, a knit") for w in rep["warnings"])
     assert not rep["tight"] and rep["settled"] and rep["penetration_mm"]["max"] <= 2.0
     try:  # asked for cotton: cotton it is, reported tight (or refused as too small)

@@ -109,37 +109,52 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     if place is not None or fabric_why != "the default" or request.fabric == CLOSE_FIT_FABRIC:
         return _run_tryon(body, spec, request, tuning, fabric_why, **kw)
     fab = get_fabric(request.fabric)
-    try:
-        first = _run_tryon(body, spec, request, tuning, fabric_why, **kw)
-    except SimulationError as e:
-        if getattr(e, "stretched_at", None) is None:  # (sewing that stalled is not a fit)
-            raise
-        first, strain = e, getattr(e, "strain", None)
-    else:
+
+    def in_default(t: Tuning):
+        try:
+            return _run_tryon(body, spec, request, t, fabric_why, **kw), None
+        except SimulationError as e:
+            if getattr(e, "stretched_at", None) is None:  # (sewing that stalled is not a fit)
+                raise
+            return e, getattr(e, "strain", None)
+
+    # the first drape stops early once it clearly ends tight (DrapeTuning.give_up): the knit follows
+    first, strain = in_default(replace(tuning, drape=replace(tuning.drape, give_up=True)))
+    if not isinstance(first, Exception):
         if not first[1]["tight"]:
             return first
         strain = first[1]["strain"]["max"]
     how = f"{100 * strain:.0f} % stretched" if strain is not None else "too stretched"
     knit = get_fabric(CLOSE_FIT_FABRIC)
-    said = f"in {fab.name} it ended {how} where {fab.name} allows {100 * fab.strain_threshold:.0f} %"
+    ended = "stayed" if getattr(first, "gave_up", False) else "ended"
+    said = f"in {fab.name} it {ended} {how} where {fab.name} allows {100 * fab.strain_threshold:.0f} %"
     why = (f"the pattern's fit: {said}: cut with no ease there, it is a garment for a knit (choose the fabric "
            f"{fab.name} to see it in {fab.name})")
-    (progress or (lambda *a: None))("sewing", 0.0, f"{said}: draping it again in {knit.name}, a knit")
+    say = progress or (lambda *a: None)
+    say("sewing", 0.0, f"{said}: draping it again in {knit.name}, a knit")
+    second, failed = None, None
     try:
-        res, rep = _run_tryon(body, spec, request.model_copy(update={"fabric": knit.name}), tuning, why, **kw)
+        second = _run_tryon(body, spec, request.model_copy(update={"fabric": knit.name}), tuning, why, **kw)
     except SimulationError as e:
-        if isinstance(first, Exception):
-            first.args = (f"{first} (in {knit.name} too: {e})",) + tuple(first.args[1:])
-            raise first
-        first[1]["warnings"].append(f"draped again in {knit.name}, a knit, it failed ({e}): this is the drape in "
-                                    f"{fab.name}")
+        failed = e
+    if second is not None and not second[1]["tight"]:
+        second[1]["warnings"].append(f"draped in {knit.name}, a knit: {said}")
+        return second
+    if getattr(first, "gave_up", False):  # the knit does not fit either: the first fabric's drape in full
+        say("sewing", 0.0, f"in {knit.name} it does not fit either: draping it in {fab.name} to the end")
+        first, _ = in_default(tuning)
+        if not isinstance(first, Exception) and not first[1]["tight"]:
+            return first
+    knit_how = (f"it failed ({failed})" if failed is not None else
+                f"it is tight too (stretched {100 * second[1]['strain']['max']:.0f} %)")
+    if not isinstance(first, Exception):
+        first[1]["warnings"].append(f"in {knit.name}, a knit, {knit_how}: this is the drape in {fab.name}")
         return first
-    if rep["tight"] and not isinstance(first, Exception):
-        first[1]["warnings"].append(f"in {knit.name}, a knit, it is tight too (stretched "
-                                    f"{100 * rep['strain']['max']:.0f} %): this is the drape in {fab.name}")
-        return first
-    rep["warnings"].append(f"draped in {knit.name}, a knit: {said}")
-    return res, rep
+    if second is not None:  # refused in the first fabric, tight in the knit: the knit's drape
+        second[1]["warnings"].append(f"draped in {knit.name}, a knit: {said}")
+        return second
+    first.args = (f"{first} (in {knit.name} too: {failed})",) + tuple(first.args[1:])
+    raise first
 
 
 def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tuning, fabric_why: str, *,

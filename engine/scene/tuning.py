@@ -62,6 +62,12 @@ class DrapeTuning:
     settle_speed: float = 0.005  # m/s: ... is below this
     too_tight: float = 0.10  # strain past the fabric's threshold by this: refused as too small ...
     refuse_after: float = 2.0  # s: ... once it stayed so this long
+    # a drape that another fabric will be tried after (engine.scene.tryon.run_tryon's knit) stops as
+    # soon as it stayed stretched past the fabric's threshold + knit_give_up for knit_give_up_after s:
+    # one that fits comes under it within a tenth of a second; one that does not ran to the budget
+    give_up: bool = False
+    knit_give_up: float = 0.05
+    knit_give_up_after: float = 0.25
     step: StepConfig = StepConfig(strain_guard=0.009)  # (sewing uses it too; its guard waits until welded)
     # cloth-cloth contact within the garment while sewing and draping (engine.cloth.selfcontact):
     # auto = where parts may come to lie on each other (engine.scene.layers), on, or off
@@ -82,6 +88,9 @@ class DrapeTuning:
         if not (0.0 <= self.tight_every_step <= 1.0):
             raise InputError(f"tight_every_step {self.tight_every_step}: use 0 .. 1 (strain past the fabric's "
                              "threshold)")
+        if not (-1.0 < self.knit_give_up <= 1.0 and 0.0 < self.knit_give_up_after <= self.budget):
+            raise InputError(f"knit_give_up {self.knit_give_up} / knit_give_up_after {self.knit_give_up_after} s: "
+                             "use a strain past the fabric's threshold in (-1, 1] and a time within the budget")
         if not (0.0 < self.check_time <= 0.01):
             raise InputError(f"drape check_time {self.check_time} s: use a time in (0, 0.01]")
 
