@@ -124,6 +124,20 @@ def test_stitched_edges_pair_head_to_tail_as_garmentcode_sews_them():
         assert same_way == want_same, pairing
 
 
+def test_panels_turn_as_garmentcodes_simulator_turns_them():
+    """GarmentCode's simulator and pattern core turn a panel by Rz Ry Rx of its Euler angles
+    (Maya's xyz); a collar's [90, 45, 0] lands where they put it (scipy's intrinsic "XYZ", which
+    its generator writes with, would turn it elsewhere)."""
+    from engine.pattern.geometry import panel_rotation_matrix
+
+    a, b, c = np.deg2rad([90.0, 45.0, 0.0])
+    rx = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    ry = np.array([[np.cos(b), 0, np.sin(b)], [0, 1, 0], [-np.sin(b), 0, np.cos(b)]])
+    rz = np.array([[np.cos(c), -np.sin(c), 0], [np.sin(c), np.cos(c), 0], [0, 0, 1]])
+    assert np.allclose(panel_rotation_matrix([90, 45, 0]), rz @ ry @ rx)
+    assert not np.allclose(panel_rotation_matrix([90, 45, 0]), rx @ ry @ rz)
+
+
 def test_gathered_seams_pair_their_edges_evenly():
     """Edges of different lengths sewn together (a trouser leg gathered into its cuff, a skirt into
     a bodice): each pair lies at the same share of both edges' lengths -- the longer edge
