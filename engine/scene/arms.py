@@ -240,3 +240,87 @@ def clear_arms(body: Body) -> Body:
 
 def _cm(gap: float) -> str:
     return f"{100 * gap:.1f} cm" if np.isfinite(gap) and gap < 1.0 else "well clear"
+
+
+THIGH_GAP_OK = 0.02  # m between the thighs at THIGH_AT of the body's height: room for both trouser legs ...
+THIGH_AT = 0.42  # (4-8 cm under the crotch of the default and GarmentCode's bodies)
+THIGH_STEP = 1.0  # degrees a step, turning the legs out at the hips ...
+THIGH_MAX = 10.0  # degrees at most
+
+
+def thigh_gap(vertices: np.ndarray, faces: np.ndarray, y: float, pelvis: float) -> float:
+    """The least distance (m) between the two legs' cross-sections at height y: 0 where they
+    touch there (one piece), inf where the body has no two legs there. pelvis: a height through
+    the pelvis (its middle parts left from right)."""
+    from scipy.spatial import cKDTree
+
+    from engine.body.measure import slice_pieces
+
+    above = slice_pieces(vertices, faces, pelvis)
+    pieces = slice_pieces(vertices, faces, y)
+    if not above or not pieces:
+        return float("inf")
+    axis = float(np.mean(max(above, key=lambda p: p.length).points[:, 0]))  # the pelvis' middle
+    left = [p for p in pieces if np.mean(p.points[:, 0]) > axis]
+    right = [p for p in pieces if np.mean(p.points[:, 0]) <= axis]
+    if not left or not right:
+        return 0.0 if len(pieces) == 1 and pieces[0].points[:, 0].min() < axis < pieces[0].points[:, 0].max() \
+            else float("inf")
+    a, b = max(left, key=lambda p: p.length).points, max(right, key=lambda p: p.length).points
+    return float(cKDTree(b).query(a)[0].min())
+
+
+def clear_thighs(body: Body) -> Body:
+    """The body to dress and walk: as given, or -- where its thighs touch or nearly touch under
+    the crotch (closer than THIGH_GAP_OK at THIGH_AT of its height: SMPL's average woman, 0.4 cm;
+    GarmentCode's mean_female 1.7, the default bodies 5-7 cm) -- with the legs turned out at the hips (the default skeleton fitted to it), a degree
+    at a time up to THIGH_MAX, until they are that far apart, saying so in its notes. There is no
+    room for cloth between thighs that touch: a trouser's inseams, sewn round each leg, stayed
+    12-15 cm open there (GarmentCode's trousers on SMPL's average woman). Returns the body
+    unchanged when it cannot be fitted."""
+    from engine.body.measure import measure
+    from engine.body.motion import _rot, pose_joints
+    from engine.body.rig import skin_fast
+    from engine.body.types import Rig
+    from engine.scene.walk import walking_body
+
+    try:
+        m = measure(body)
+    except (InputError, ValueError):
+        return body
+    floor = float(body.vertices[:, 1].min())
+    y, pelvis = floor + THIGH_AT * m.height, floor + 0.5 * (m.crotch_height + m.hip_height)
+    if not (np.isfinite(y) and np.isfinite(pelvis) and pelvis > y):
+        return body
+    gap0 = thigh_gap(body.vertices, body.faces, y, pelvis)
+    if not gap0 < THIGH_GAP_OK:
+        return body
+    try:
+        rigged = walking_body(body)
+    except (InputError, ValueError, np.linalg.LinAlgError):
+        return body
+    rig = rigged.rig
+    if not {"upperleg01.L", "upperleg01.R"} <= set(rig.joint_names):
+        return body
+
+    def turn(deg: float) -> dict:
+        return {"upperleg01.L": _rot("z", deg), "upperleg01.R": _rot("z", -deg)}  # left is +x: out
+
+    deg, gap, v = 0.0, gap0, rigged.vertices
+    while gap < THIGH_GAP_OK and deg < THIGH_MAX:
+        deg += THIGH_STEP
+        v = skin_fast(rigged.vertices, rig, pose_joints(rig, turn(deg)))
+        gap = thigh_gap(v, rigged.faces, y, pelvis)
+    posed = Rig(joint_names=list(rig.joint_names), parents=rig.parents, rest_transforms=pose_joints(rig, turn(deg)),
+                skin_indices=rig.skin_indices, skin_weights=rig.skin_weights)
+    touch = "touched" if gap0 < 0.002 else f"were {100 * gap0:.1f} cm apart"
+    note = (f"the legs were turned {deg:.0f} degrees out at the hips for dressing and walking: the thighs {touch} "
+            f"{100 * (y - floor):.0f} cm above the floor (too little room for cloth between "
+            f"them), {100 * gap:.1f} cm apart now")
+    return Body(vertices=v, faces=rigged.faces, name=body.name, segments=rigged.segments, rig=posed,
+                notes=list(rigged.notes) + [note], to_world=body.to_world)
+
+
+def clear_limbs(body: Body) -> Body:
+    """clear_arms, then clear_thighs: the body every try-on dresses and walks."""
+    return clear_thighs(clear_arms(body))
