@@ -347,14 +347,20 @@ def test_fire_mix_turns_velocity_toward_the_force_or_stops():
     x = np.array([[0.0, 1.0, 0.0], [0.5, 1.0, 0.2]])
     want = 0.9 * v + 0.1 * np.linalg.norm(v) * f / np.linalg.norm(f)
     x1 = x.copy()
-    p = KI.fire_mix(f, v, x1, 0.01, 0.1)
+    p = KI.fire_mix(f, v, x1, 0.01, 0.1, np.zeros(len(v), dtype=np.bool_))
     assert p == pytest.approx(0.5)
     np.testing.assert_allclose(v, want, atol=1e-12)
     np.testing.assert_array_equal(x1, x)
     v2, x2 = -v, x.copy()
-    assert KI.fire_mix(f, v2, x2, 0.01, 0.1) < 0
+    assert KI.fire_mix(f, v2, x2, 0.01, 0.1, np.zeros(len(v2), dtype=np.bool_)) < 0
     np.testing.assert_allclose(x2, x + 0.005 * v, atol=1e-15)  # back along -v2, half a step
     assert np.all(v2 == 0.0)
+    # a vertex in contact with the body is left out of the power (the contact response, not the
+    # forces, moved it): here the first one's swing back alone no longer stops the cloth
+    v3 = np.array([[-0.5, 0.0, 0.0], [0.0, 0.1, 0.0]])
+    assert KI.fire_mix(f, v3.copy(), x.copy(), 0.01, 0.1, np.zeros(2, dtype=np.bool_)) < 0
+    assert KI.fire_mix(f, v3, x.copy(), 0.01, 0.1, np.array([True, False])) == pytest.approx(0.2)
+    assert np.any(v3 != 0.0)
 
 
 

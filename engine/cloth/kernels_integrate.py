@@ -39,17 +39,18 @@ def kinetic_energy(v, mass):
 
 
 @serial_kernel
-def fire_mix(f, v, x, dt, alpha):
+def fire_mix(f, v, x, dt, alpha, skip):
     """One FIRE velocity step after a solver step (see engine.cloth.solver.FireRelaxer): the
-    power P = sum f.v; when P > 0, v <- (1 - alpha) v + alpha |v| f / |f| (all vertices as one
-    vector), else the positions go back half the step just taken (x -= dt v / 2, FIRE 2.0) and
-    every velocity is zeroed. Returns P."""
+    power P = sum f.v over the vertices not `skip`ped (N,) bool; when P > 0, v <- (1 - alpha) v
+    + alpha |v| f / |f| (all vertices as one vector), else the positions go back half the step
+    just taken (x -= dt v / 2, FIRE 2.0) and every velocity is zeroed. Returns P."""
     p = 0.0
     vv = 0.0
     ff = 0.0
     for i in range(v.shape[0]):
         for c in range(3):
-            p += f[i, c] * v[i, c]
+            if not skip[i]:
+                p += f[i, c] * v[i, c]
             vv += v[i, c] * v[i, c]
             ff += f[i, c] * f[i, c]
     if p > 0.0:
