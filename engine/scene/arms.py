@@ -242,8 +242,7 @@ def _cm(gap: float) -> str:
     return f"{100 * gap:.1f} cm" if np.isfinite(gap) and gap < 1.0 else "well clear"
 
 
-THIGH_NEAR = 0.01  # m: thighs closer than this at THIGH_AT of the body's height ...
-THIGH_CLEAR = 0.02  # m: ... are turned apart until this far: room for both trouser legs' cloth
+THIGH_GAP_OK = 0.02  # m between the thighs at THIGH_AT of the body's height: room for both trouser legs ...
 THIGH_AT = 0.42  # (4-8 cm under the crotch of the default and GarmentCode's bodies)
 THIGH_STEP = 1.0  # degrees a step, turning the legs out at the hips ...
 THIGH_MAX = 10.0  # degrees at most
@@ -273,10 +272,9 @@ def thigh_gap(vertices: np.ndarray, faces: np.ndarray, y: float, pelvis: float) 
 
 def clear_thighs(body: Body) -> Body:
     """The body to dress and walk: as given, or -- where its thighs touch or nearly touch under
-    the crotch (closer than THIGH_NEAR at THIGH_AT of its height: SMPL's average woman, 0.4 cm;
-    GarmentCode's mean_female 1.6, the default bodies 5-7 cm) -- with the legs turned out at the
-    hips (the default skeleton fitted to it), a degree at a time up to THIGH_MAX, until they are
-    THIGH_CLEAR apart, saying so in its notes. There is no
+    the crotch (closer than THIGH_GAP_OK at THIGH_AT of its height: SMPL's average woman, 0.4 cm;
+    GarmentCode's mean_female 1.7, the default bodies 5-7 cm) -- with the legs turned out at the hips (the default skeleton fitted to it), a degree
+    at a time up to THIGH_MAX, until they are that far apart, saying so in its notes. There is no
     room for cloth between thighs that touch: a trouser's inseams, sewn round each leg, stayed
     12-15 cm open there (GarmentCode's trousers on SMPL's average woman). Returns the body
     unchanged when it cannot be fitted."""
@@ -295,7 +293,7 @@ def clear_thighs(body: Body) -> Body:
     if not (np.isfinite(y) and np.isfinite(pelvis) and pelvis > y):
         return body
     gap0 = thigh_gap(body.vertices, body.faces, y, pelvis)
-    if not gap0 < THIGH_NEAR:
+    if not gap0 < THIGH_GAP_OK:
         return body
     try:
         rigged = walking_body(body)
@@ -309,7 +307,7 @@ def clear_thighs(body: Body) -> Body:
         return {"upperleg01.L": _rot("z", deg), "upperleg01.R": _rot("z", -deg)}  # left is +x: out
 
     deg, gap, v = 0.0, gap0, rigged.vertices
-    while gap < THIGH_CLEAR and deg < THIGH_MAX:
+    while gap < THIGH_GAP_OK and deg < THIGH_MAX:
         deg += THIGH_STEP
         v = skin_fast(rigged.vertices, rig, pose_joints(rig, turn(deg)))
         gap = thigh_gap(v, rigged.faces, y, pelvis)
