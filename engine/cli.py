@@ -65,12 +65,11 @@ def _body(spec: str, up: Optional[str], front: Optional[str]):
 
 
 def _dressable(spec: str, up: Optional[str], front: Optional[str]):
-    """_body, with the arms turned out where they touch the torso or the hips, and the legs where the thighs
-    touch (engine.scene.arms.clear_limbs)."""
-    from engine.scene.arms import clear_limbs
+    """_body, with the arms turned out where they touch the torso or the hips (engine.scene.arms.clear_arms)."""
+    from engine.scene.arms import clear_arms
 
     loaded = _body(spec, up, front)
-    body = clear_limbs(loaded)
+    body = clear_arms(loaded)
     if body is not loaded:
         typer.echo(f"note: {body.notes[-1]}", err=True)
     return body

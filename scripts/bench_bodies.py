@@ -227,7 +227,7 @@ def write_table(rows, out: Path, r: dict) -> Path:
 def run_body(name: str, garments, args, tmp: Path, done: dict, thumbs: dict, out: Path) -> list[dict]:
     """Every garment on one body; cells of a body that loads back as one already run are its."""
     from engine.errors import TryonError
-    from engine.scene.arms import clear_limbs
+    from engine.scene.arms import clear_arms
     from engine.scene.walk import walk_strip, walking_body
 
     try:
@@ -235,7 +235,7 @@ def run_body(name: str, garments, args, tmp: Path, done: dict, thumbs: dict, out
         twin = next((k for k, (b, _) in done.items() if not args.no_reuse and same_body(b, loaded)), None)
         if twin is not None:
             return [dict(c, same_as=twin) for c in done[twin][1] if c["garment"] in garments]
-        body = clear_limbs(loaded)  # as `tryon walk` does
+        body = clear_arms(loaded)  # as `tryon walk` does
         walker = walking_body(body)
     except TryonError as e:
         return [{"garment": g, "ok": False, "error": f"the body: {e}"} for g in garments]

@@ -124,16 +124,12 @@ def main() -> None:
     if not (1 <= a.n <= 1000):
         sys.exit("--n: 1 .. 1000 designs")
     from engine.body import resolve_body
-    from engine.scene.arms import clear_limbs
     from engine.scene.request import TryOnOptions
 
     a.out.mkdir(parents=True, exist_ok=True)
     paths = sorted(a.patterns.glob("*_specification.json")) if a.patterns else \
         draw(a.body if a.body in BODIES else "mean_female", a.n, a.seed, a.out / "patterns")
-    loaded = resolve_body(str(BODIES.get(a.body, a.body)))
-    body = clear_limbs(loaded)  # as the service dresses it
-    for line in body.notes[len(loaded.notes):]:
-        print(f"note: {line}")
+    body = resolve_body(str(BODIES.get(a.body, a.body)))
     request = TryOnOptions(resolution_cm=a.resolution, **({"fabric": a.fabric} if a.fabric else {}))
     rows = []
     for p in paths:

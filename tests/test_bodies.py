@@ -227,31 +227,3 @@ def test_a_real_scan_with_its_hands_on_the_thighs_turns_its_arms_out_cleanly(tmp
     legs = np.isin(cleared.segments, [SEGMENT_ID["left_leg"], SEGMENT_ID["right_leg"]])
     moved = np.linalg.norm(cleared.vertices - scan.vertices, axis=1)
     assert np.all(moved[legs] < 0.01)  # no hand left labelled leg (it would have stayed on the thigh)
-
-
-def test_thighs_that_touch_are_turned_apart():
-    """There is no room for a trouser's two inseams between thighs that touch (GarmentCode's
-    trousers on SMPL's average woman stayed 15 cm open there): the legs are turned out at the
-    hips until the thighs are THIGH_GAP_OK apart at THIGH_AT of the height, the body rigged in
-    that pose and saying so; the torso and arms stay; bodies with room are left as they are."""
-    from engine.scene.arms import THIGH_AT, THIGH_GAP_OK, THIGH_MAX, clear_limbs, clear_thighs, thigh_gap
-    from engine.body.types import SEGMENT_ID
-    from tests.samples import ROOT
-
-    smpl = resolve_body(str(ROOT.parent / "shared" / "garmentcode" / "assets" / "bodies" / "f_smpl_average_A40.obj"))
-    m = measure(smpl)
-    y, pelvis = THIGH_AT * m.height, 0.5 * (m.crotch_height + m.hip_height)
-    assert thigh_gap(smpl.vertices, smpl.faces, y, pelvis) < 0.01
-    apart = clear_limbs(smpl)
-    assert apart.rig is not None and apart.notes[-1].startswith("the legs were turned")
-    gap = thigh_gap(apart.vertices, apart.faces, y, pelvis)
-    assert gap >= THIGH_GAP_OK or f"turned {THIGH_MAX:.0f} degrees" in apart.notes[-1]
-    upper = np.isin(apart.segments, [SEGMENT_ID["torso"], SEGMENT_ID["left_arm"], SEGMENT_ID["right_arm"],
-                                     SEGMENT_ID["head"]]) & (smpl.vertices[:, 1] > m.hip_height + 0.1)
-    moved = np.linalg.norm(apart.vertices[upper] - smpl.vertices[upper], axis=1)
-    assert np.median(moved) < 1e-6 and moved.max() < 0.01  # (the skin over the hip joints follows a little)
-    feet = smpl.vertices[:, 1] < 0.05
-    assert np.abs(apart.vertices[feet, 0]).mean() > np.abs(smpl.vertices[feet, 0]).mean() + 0.02  # feet apart
-    for spec in ("default:female", "default:male,weight=1.0"):
-        body = resolve_body(spec)
-        assert clear_thighs(body) is body

@@ -219,9 +219,9 @@ def _run(req: dict, out: Path, progress, live=None) -> dict:
         track = load_animation(b["animation"], float(b.get("fps", 30.0)))
         body = track.body
     else:
-        from engine.scene.arms import clear_limbs
+        from engine.scene.arms import clear_arms
 
-        body = clear_limbs(resolve_body(b["spec"] if "spec" in b else b["file"]))
+        body = clear_arms(resolve_body(b["spec"] if "spec" in b else b["file"]))
     g = req["garment"]
     walking = req.get("motion", "none") == "walk"
     from app.queue.live_view import LiveView
