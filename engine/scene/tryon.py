@@ -102,8 +102,9 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     A pattern file that names no fabric (nor was one asked for) is draped in DEFAULT_FABRIC; if
     that leaves it stretched past the fabric's limit (tight, or refused as too small while
     draping), it has no ease there -- a garment cut that close is sewn from a knit -- and it is
-    draped again in CLOSE_FIT_FABRIC, the report's fabric_why and a warning saying so. If the
-    knit does not fit either, the first drape (or its refusal) stands, noted."""
+    draped again in CLOSE_FIT_FABRIC, the report's fabric_why and a warning saying so. That first
+    drape stops as soon as it stays clearly tight (DrapeTuning.give_up). If the knit does not fit
+    either, the first fabric's drape (then run to its end) or its refusal stands, noted."""
     request, fabric_why = with_fabric(request, spec)
     kw = dict(place=place, source=source, progress=progress, observer=observer, lift=lift)
     if place is not None or fabric_why != "the default" or request.fabric == CLOSE_FIT_FABRIC:
