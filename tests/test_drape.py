@@ -84,6 +84,15 @@ def test_a_garment_that_slid_down_or_bunched_up_is_flagged():
     assert len(heap) == 1 and "rose 60 cm" in heap[0] and "bunched up" in heap[0]
     slid = hang_warnings(hang_shift(placed, shifted(0.05, 1.2)))  # slid down 20 cm
     assert len(slid) == 1 and "slid 20 cm down" in slid[0]
+    ident = np.arange(len(placed))
+    assert "slid 20 cm down" in hang_warnings(hang_shift(placed, shifted(0.3, 1.2), ident))[0]  # all of it
+    # a collar placed standing up to 1.5 m that folds down to 1.3, the dress below risen 8 cm: not a slide
+    collar = placed[:20] * [1, 0, 1] + [0, 1.5, 0]
+    worn = np.vstack([shifted(0.58, 1.48)[20:] - [0, 0.1, 0], collar - [0, 0.2, 0]])
+    placed_c = np.vstack([placed[20:] - [0, 0.1, 0], collar])
+    folded = hang_shift(placed_c, worn, ident)
+    assert folded["top"] < -0.10 and folded["bulk"] > 0.05
+    assert hang_warnings(folded) == []
 
 
 def test_fit_warnings_say_tight_or_unsettled():
