@@ -56,7 +56,7 @@ def test_drape_command_writes_everything(tmp_path):
     assert rep["iterations"] > 0 and rep["ms_per_iteration"]["total"] > 0
     assert np.isfinite(rep["penetration_mm"]["max"])
     # the strain guard is reported with how much of the last settle window it acted in
-    assert rep["strain"]["guard"] == pytest.approx(0.009) and 0.0 <= rep["strain"]["guard_share"] <= 1.0
+    assert rep["strain"]["guard"] == pytest.approx(DrapeTuning().step.strain_guard) and 0.0 <= rep["strain"]["guard_share"] <= 1.0
     # the skirt stays on the body: its top is near the waist (the sample body's waist ~1.08 m)
     import trimesh
 

@@ -402,7 +402,7 @@ HEM_RISE = 0.15  # m: ... whose lowest point ends this far above its placed heig
 PANEL_TALL = 0.15  # m: ... where a panel placed at least this tall ...
 BUNCHED = 0.6  # ... hangs shorter than this share of its placed height (hang_warnings)
 TIGHT = 0.01  # a drape stretched past the fabric's threshold by more than this is reported tight
-# (issue 3's quality limit; the strain guard holds a garment that fits at threshold + 0.9 %)
+# (issue 3's quality limit; the strain guard holds a garment that fits at threshold + 0.5 %)
 CLOSE_FIT_FABRIC = "jersey"  # a pattern file too tight for the default fabric is draped again in this knit
 
 

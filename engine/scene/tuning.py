@@ -68,7 +68,7 @@ class DrapeTuning:
     give_up: bool = False
     knit_give_up: float = 0.05
     knit_give_up_after: float = 0.25
-    step: StepConfig = StepConfig(strain_guard=0.009)  # (sewing uses it too; its guard waits until welded)
+    step: StepConfig = StepConfig(strain_guard=0.005)  # (sewing uses it too; its guard waits until welded)
     # cloth-cloth contact within the garment while sewing and draping (engine.cloth.selfcontact):
     # auto = where parts may come to lie on each other (engine.scene.layers), on, or off
     self_contact: str = "auto"
