@@ -88,9 +88,9 @@ class DrapeTuning:
         if not (0.0 <= self.tight_every_step <= 1.0):
             raise InputError(f"tight_every_step {self.tight_every_step}: use 0 .. 1 (strain past the fabric's "
                              "threshold)")
-        if not (-1.0 < self.knit_give_up <= 1.0 and 0.0 < self.knit_give_up_after <= self.budget):
+        if not (-1.0 < self.knit_give_up <= 1.0 and 0.0 < self.knit_give_up_after <= 60.0):
             raise InputError(f"knit_give_up {self.knit_give_up} / knit_give_up_after {self.knit_give_up_after} s: "
-                             "use a strain past the fabric's threshold in (-1, 1] and a time within the budget")
+                             "use a strain past the fabric's threshold in (-1, 1] and a time in (0, 60] s")
         if not (0.0 < self.check_time <= 0.01):
             raise InputError(f"drape check_time {self.check_time} s: use a time in (0, 0.01]")
 
