@@ -288,8 +288,9 @@ def test_a_pattern_cut_with_no_ease_is_draped_in_a_knit():
 @pytest.mark.integration
 def test_a_fresh_seeded_sample_drapes(tmp_path):
     """Twenty designs freshly drawn by GarmentCode's sampler (seed 7) on mean_female. Where we
-    stand (docs/patterns.md): 10-25 % of GarmentCode's designs meet the bars; the target is 95 %.
-    This guards against losing ground: at least 2 of 20 must drape."""
+    stand (docs/patterns.md): 40-55 % of GarmentCode's designs meet the bars (seed 7: 8 of 20 on
+    2026-12-06); the target is 95 %. This guards against losing ground, with room for the
+    chaos of sewing and settling (single designs flip with small changes): at least 5 of 20."""
     from engine.body import resolve_body
     from engine.scene.request import TryOnOptions
 
@@ -303,4 +304,4 @@ def test_a_fresh_seeded_sample_drapes(tmp_path):
     rows = [bench.drape_one(p, body, TryOnOptions()) for p in paths]
     ok = [r["design"] for r in rows if r["ok"]]
     print(f"{len(ok)} of {len(rows)} drape:", ok, file=sys.stderr)
-    assert len(rows) >= 16 and len(ok) >= 2, [(r["design"], r.get("reason")) for r in rows]
+    assert len(rows) >= 16 and len(ok) >= 5, [(r["design"], r.get("reason")) for r in rows]
