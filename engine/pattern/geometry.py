@@ -120,7 +120,7 @@ def panel_rotation_matrix(rotation_deg) -> np.ndarray:
     """(3, 3) rotation from GarmentCode's Euler angles (degrees) as its simulator and its pattern
     core read them: Rz Ry Rx (Maya's xyz; extrinsic). (Its generator writes scipy's intrinsic
     "XYZ" angles; the two differ where two angles are non-zero -- its collars -- and there the
-    simulator's reading puts a collar 2-7 cm nearer the edges it is sewn to.)"""
+    simulator's reading puts a collar 4-7 cm nearer the edges it is sewn to.)"""
     from scipy.spatial.transform import Rotation
 
     return Rotation.from_euler("xyz", np.asarray(rotation_deg, dtype=np.float64), degrees=True).as_matrix()

@@ -456,7 +456,7 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
     strains = deque(maxlen=max(1, int(round(t.refuse_after / (sub * dt)))))  # max strain at the last checks
     refuse = fabric.strain_threshold + t.too_tight
     tight = fabric.strain_threshold + t.tight_every_step
-    give_up = fabric.strain_threshold + t.knit_give_up if t.give_up else np.inf
+    give_up = fabric.strain_threshold + t.knit_give_up
     n_give_up = max(1, int(round(t.knit_give_up_after / (sub * dt))))
     every_step_from = None
     drift, guard_steps, guard_share = np.inf, 0, 0.0
@@ -489,8 +489,9 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
         if it >= min_it and len(strains) == strains.maxlen and min(strains) > refuse:
             raise _too_small(state, model, min(strains), fabric,
                              f"for {len(strains) * sub * dt:.1f} s of draping it stayed stretched at least")
-        if it >= min_it and len(strains) >= n_give_up and min(list(strains)[-n_give_up:]) > give_up:
-            err = _too_small(state, model, min(list(strains)[-n_give_up:]), fabric,
+        if t.give_up and it >= min_it and len(strains) >= n_give_up and \
+                (least := min(list(strains)[-n_give_up:])) > give_up:
+            err = _too_small(state, model, least, fabric,
                              f"for {n_give_up * sub * dt:.2f} s of draping it stayed stretched at least")
             err.gave_up = True  # (DrapeTuning.give_up: another fabric follows)
             raise err
