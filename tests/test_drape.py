@@ -838,7 +838,8 @@ def test_a_panel_that_rose_into_place_hanging_full_length_is_not_bunched_up():
 
     y = np.linspace(0.0, 1.0, 11)
     placed = np.column_stack([np.zeros(22), np.concatenate([y - 0.5, y + 0.5]), np.zeros(22)])  # legs, bodice
-    garment = SimpleNamespace(positions=placed, panel=np.repeat([0, 1], 11), panel_names=["pant", "bodice"])
+    garment = SimpleNamespace(positions=placed, uv=placed[:, :2].copy(), panel=np.repeat([0, 1], 11),
+                              panel_names=["pant", "bodice"])
     risen = placed.copy()
     risen[:11, 1] += 0.3  # the trousers rose 30 cm into place, full length
     res = SimpleNamespace(positions=risen, vertex_map=np.arange(22))
@@ -850,7 +851,36 @@ def test_a_panel_that_rose_into_place_hanging_full_length_is_not_bunched_up():
     shrunk = shortest_panel(garment, SimpleNamespace(positions=heaped, vertex_map=np.arange(22)))
     assert shrunk[1] == "pant" and shrunk[0] < BUNCHED
     said = hang_warnings(hang_shift(placed, heaped), None, shrunk)
-    assert len(said) == 1 and "bunched up" in said[0] and "panel 'pant' hangs 30 cm tall, placed 100 cm" in said[0]
+    assert len(said) == 1 and "bunched up" in said[0] and "panel 'pant' hangs 30 cm tall, 90 cm long" in said[0]  # (its top 3 cm: two of the 11 points)
     # without a map from the garment's vertices the risen hem alone says so (as before)
     assert shortest_panel(garment, SimpleNamespace(positions=risen, vertex_map=None)) is None
     assert "bunched up" in hang_warnings(hang_shift(placed, risen))[0]
+
+
+def test_a_ring_tier_laid_out_tall_hangs_its_width_and_is_not_bunched_up():
+    """A ruffle tier is a ring sector: GarmentCode lays it out flat and upright, 95 cm tall for a
+    17 cm wide ring, and it hangs from its seam to the tier above 17 cm (its width), that seam
+    dipping at the sides -- not bunched up. The same cloth heaped to 5 cm is."""
+    from types import SimpleNamespace
+
+    from engine.scene.tryon import BUNCHED, shortest_panel
+
+    r, a = np.meshgrid(np.linspace(0.78, 0.95, 8), np.linspace(0.0, np.pi, 60))
+    uv = np.column_stack([(r * np.cos(a)).ravel(), (r * np.sin(a)).ravel()])  # a half ring, 1.9 x 0.95 m
+    inner = np.flatnonzero(np.isclose(r.ravel(), 0.78))
+    n, m = len(uv), len(inner)
+    above = np.column_stack([uv[inner, 0], np.linspace(0.0, 0.01, m)])  # the tier above's hem, 1 cm tall
+    placed = np.concatenate([np.column_stack([uv, np.zeros(n)]), np.column_stack([above, np.zeros(m)])])
+    garment = SimpleNamespace(positions=placed, uv=np.concatenate([uv, above]),
+                              panel=np.repeat([0, 1], [n, m]), panel_names=["tier", "above"],
+                              seams=np.column_stack([inner, n + np.arange(m)]), seam_id=np.zeros(m, int))
+    # hung round the hips from that seam, which dips 6 cm at the sides (more than HUNG_FROM)
+    rr, aa = np.hypot(uv[:, 0], uv[:, 1]), a.ravel()
+    hung = np.column_stack([0.2 * np.cos(aa), 1.0 - 0.06 * np.cos(aa) ** 2 - (rr - 0.78), 0.2 * np.sin(aa)])
+    hung = np.concatenate([hung, hung[inner] + [0.0, 0.005, 0.0]])
+    vmap = np.arange(len(placed))
+    ratio, name, draped, length = shortest_panel(garment, SimpleNamespace(positions=hung, vertex_map=vmap))
+    assert name == "tier" and length == pytest.approx(0.17, abs=0.01) and ratio > 0.9
+    heaped = hung.copy()
+    heaped[:n, 1] = 1.0 - 0.3 * (rr - 0.78)
+    assert shortest_panel(garment, SimpleNamespace(positions=heaped, vertex_map=vmap))[0] < BUNCHED

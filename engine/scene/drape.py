@@ -121,14 +121,25 @@ class _Dressing:
     @cached_property
     def meet_side(self) -> np.ndarray:
         """(P, 3) each stitch pair's way out of the body (_meet_beside): from the middles of the two
-        panels to the pair's ends, as placed."""
+        panels to the pair's ends, as placed, square to each edge where it is (the part along the
+        edge is left out: a sleeve's underarm seam ends at the armpit, far along the sleeve from
+        its middle, and would otherwise be sent through the torso rather than under the arm)."""
         g = self.garment
         n = int(g.panel.max()) + 1
         c = np.zeros((n, 3))
         np.add.at(c, g.panel, g.positions)
         c /= np.maximum(np.bincount(g.panel, minlength=n), 1)[:, None]
-        a, b = g.seams[:, 0], g.seams[:, 1]
-        return (g.positions[a] - c[g.panel[a]]) + (g.positions[b] - c[g.panel[b]])
+        # each pair's neighbours along its stitch (the pairs of a stitch follow its edges in order)
+        k = np.arange(len(g.seams))
+        prev = np.where((k > 0) & (np.roll(g.seam_id, 1) == g.seam_id), k - 1, k)
+        nxt = np.where((k < len(k) - 1) & (np.roll(g.seam_id, -1) == g.seam_id), k + 1, k)
+        side = np.zeros((len(k), 3))
+        for v in (g.seams[:, 0], g.seams[:, 1]):
+            out = g.positions[v] - c[g.panel[v]]
+            t = g.positions[v[nxt]] - g.positions[v[prev]]
+            t /= np.maximum(np.linalg.norm(t, axis=1), 1e-12)[:, None]
+            side += out - (out * t).sum(1)[:, None] * t
+        return side
 
     def solver(self, model: ClothModel) -> ClothSolver:
         return ClothSolver(model, self.collider, dressing_config(self.request, self.tuning, self.layered),
@@ -344,9 +355,21 @@ def _meet_beside(job: _Dressing, x: np.ndarray, sewing: Sewing, gaps: np.ndarray
         t[go] += np.maximum(-sd[go], 0.003)
         sd[go] = job.body.signed_distance(mid[go] + d[go] * t[go, None], max_distance=0.5)
         out |= np.isfinite(sd) & (sd > 0.0)
-    if out.any():
-        k = on[out]
-        sewing.meet[k] = mid[out] + d[out] * (t[out] + job.tuning.cloth.tolerance + job.tuning.sew.meet_margin)[:, None]
+    margin = job.tuning.cloth.tolerance + job.tuning.sew.meet_margin
+    # a way out farther than half the pair's gap crossed the body (a sleeve's underarm pair whose
+    # midpoint lies in the torso's side, sent across the chest): such a pair meets at the surface
+    # nearest its midpoint instead (the armpit)
+    far = ~out | (t > 0.5 * np.linalg.norm(gap, axis=1))
+    if far.any():
+        _, cpt, normal, face, _ = job.body.closest(mid[far])
+        ok = face >= 0
+        k = on[far][ok]
+        sewing.meet[k] = cpt[ok] + normal[ok] * margin
+        sewing.meet_on[k] = True
+    near = out & ~far
+    if near.any():
+        k = on[near]
+        sewing.meet[k] = mid[near] + d[near] * (t[near] + margin)[:, None]
         sewing.meet_on[k] = True
 
 

@@ -400,7 +400,8 @@ TOP_DROP = 0.10  # m: a garment whose top ends this far below where it was place
 SLID_OFF = 0.25
 HEM_RISE = 0.15  # m: ... whose lowest point ends this far above its placed height bunched up ...
 PANEL_TALL = 0.15  # m: ... where a panel placed at least this tall ...
-BUNCHED = 0.6  # ... hangs shorter than this share of its placed height (hang_warnings)
+BUNCHED = 0.6  # ... hangs shorter than this share of the length it can hang (hang_warnings) ...
+HUNG_FROM = 0.03  # m: ... reaching from its highest seam (sewn to none: its vertices this near its top)
 TIGHT = 0.01  # a drape stretched past the fabric's threshold by more than this is reported tight
 # (issue 3's quality limit; the strain guard holds a garment that fits at threshold + 0.5 %)
 CLOSE_FIT_FABRIC = "jersey"  # a pattern file too tight for the default fabric is draped again in this knit
@@ -452,14 +453,23 @@ def sharp_folds(positions: np.ndarray, triangles: np.ndarray, degrees: float = 1
 
 
 def shortest_panel(garment: Garment, res: DrapeResult) -> tuple[float, str, float, float] | None:
-    """Of the panels placed at least PANEL_TALL tall, the one whose drape is shortest for its
-    placed height: (draped / placed height, its name, draped m, placed m); None when no panel is
-    that tall or the drape has no map from the garment's vertices."""
+    """Of the panels placed at least PANEL_TALL tall, the one whose drape is shortest for the
+    length it can hang: (draped height / that length, its name, draped m, length m); None when no
+    panel is that tall or the drape has no map from the garment's vertices. The length is the
+    lesser of its placed height and how far its flat cloth reaches from where it hangs: the seams
+    across it that end highest (within HUNG_FROM of the highest: a tier's to the tier above, a
+    peplum's to the bodice's pieces, a bodice's shoulder seam; a seam dropping more than half its
+    length runs down the side; a panel sewn across nowhere hangs from its top HUNG_FROM). A ring sector (a circle peplum, a ruffle tier) laid out flat
+    95 cm tall hangs its ring's width, 17 cm."""
+    from scipy.spatial import cKDTree
+
     vmap = res.vertex_map
     if vmap is None or len(vmap) != len(garment.positions):
         return None
     best = None
     y0, y1 = garment.positions[:, 1], res.positions[vmap, 1]
+    seams = getattr(garment, "seams", np.zeros((0, 2), np.int64))
+    sid = getattr(garment, "seam_id", np.zeros(0, np.int64))
     for p, name in enumerate(garment.panel_names):
         on = garment.panel == p
         if not on.any():
@@ -467,9 +477,22 @@ def shortest_panel(garment: Garment, res: DrapeResult) -> tuple[float, str, floa
         placed = float(np.ptp(y0[on]))
         if placed < PANEL_TALL:
             continue
-        ratio = float(np.ptp(y1[on])) / placed
+        draped = float(np.ptp(y1[on]))
+        across = []  # its seams across it (not side seams running down): (mean draped height, vertices)
+        mine = on[seams]
+        for s in np.unique(sid[mine.any(1)]):
+            v = seams[sid == s][mine[sid == s]]
+            if len(v) >= 2 and np.ptp(y1[v]) <= 0.5 * np.linalg.norm(np.diff(garment.uv[v], axis=0), axis=1).sum():
+                across.append((float(y1[v].mean()), v))
+        top = max((h for h, _ in across), default=None)
+        hung = np.concatenate([v for h, v in across if h >= top - HUNG_FROM]) if across else None
+        if hung is None:
+            hung = np.flatnonzero(on & (y1 >= y1[on].max() - min(HUNG_FROM, 0.2 * draped)))
+        reach = float(cKDTree(garment.uv[hung]).query(garment.uv[on])[0].max())
+        length = min(placed, reach)
+        ratio = draped / max(length, 1e-9)
         if best is None or ratio < best[0]:
-            best = (ratio, name, float(np.ptp(y1[on])), placed)
+            best = (ratio, name, draped, length)
     return best
 
 
@@ -477,14 +500,14 @@ def hang_warnings(shift: dict[str, float], crossing: str | None = None,
                   shrunk: tuple[float, str, float, float] | None = None) -> list[str]:
     """What a drape that ended off where it was placed says; crossing: crossing_hint's, said with it.
     shrunk: shortest_panel's; a risen hem is bunching only where a panel also hangs shorter than
-    BUNCHED of its placed height (GarmentCode stacks a jumpsuit's trousers below its bodice in the
+    BUNCHED of the length it can hang (GarmentCode stacks a jumpsuit's trousers below its bodice in the
     layout: they rise into place, hanging full length); None: the risen hem alone says so."""
     out = []
     if slid(shift, TOP_DROP):
         out.append(f"the garment slid {-100 * shift['top']:.0f} cm down the body from where it was placed: "
                    "it may be too large for this body (try a smaller size)")
     if shift["hem"] > HEM_RISE and (shrunk is None or shrunk[0] < BUNCHED):
-        panel = (f"; panel '{shrunk[1]}' hangs {100 * shrunk[2]:.0f} cm tall, placed {100 * shrunk[3]:.0f} cm"
+        panel = (f"; panel '{shrunk[1]}' hangs {100 * shrunk[2]:.0f} cm tall, {100 * shrunk[3]:.0f} cm long"
                  if shrunk is not None else "")
         out.append(f"the garment's lowest point rose {100 * shift['hem']:.0f} cm from where it was placed{panel}: "
                    "it bunched up instead of hanging (look at the pictures)")
