@@ -57,6 +57,10 @@ def dressing_config(request: TryOnOptions, tuning: Tuning, layered: bool = False
     (engine.scene.layers decides; DrapeTuning.self_contact "on" forces it)."""
     on = tuning.drape.self_contact == "on" or (layered and tuning.drape.self_contact == "auto")
     step = replace(tuning.drape.step, velocity_mode=request.velocity_mode)
+    d = tuning.drape
+    if step.strain_guard is not None and d.soft_guard is not None and \
+            get_fabric(request.fabric).strain_threshold >= d.soft_from:
+        step = replace(step, strain_guard=min(step.strain_guard, d.soft_guard))
     return replace(step, self_collision=True) if on else step
 
 
@@ -356,10 +360,11 @@ def _meet_beside(job: _Dressing, x: np.ndarray, sewing: Sewing, gaps: np.ndarray
         sd[go] = job.body.signed_distance(mid[go] + d[go] * t[go, None], max_distance=0.5)
         out |= np.isfinite(sd) & (sd > 0.0)
     margin = job.tuning.cloth.tolerance + job.tuning.sew.meet_margin
-    # a way out farther than half the pair's gap crossed the body (a sleeve's underarm pair whose
+    # a way out farther than the pair's gap crossed the body (a sleeve's underarm pair whose
     # midpoint lies in the torso's side, sent across the chest): such a pair meets at the surface
-    # nearest its midpoint instead (the armpit)
-    far = ~out | (t > 0.5 * np.linalg.norm(gap, axis=1))
+    # nearest its midpoint instead (the armpit). (A trouser leg's inseam pair round the leg goes
+    # out about half its gap: the nearest surface could be the leg's outer side.)
+    far = ~out | (t > np.linalg.norm(gap, axis=1))
     if far.any():
         _, cpt, normal, face, _ = job.body.closest(mid[far])
         ok = face >= 0

@@ -69,6 +69,11 @@ class DrapeTuning:
     knit_give_up: float = 0.05
     knit_give_up_after: float = 0.25
     step: StepConfig = StepConfig(strain_guard=0.005)  # (sewing uses it too; its guard waits until welded)
+    # a fabric allowed soft_from or more (a knit) is held soft_guard past its threshold: the softer
+    # cloth overshoots the guard more between its passes (jersey ended 15.5-16.2 % at 0.5 %: either
+    # side of the threshold + 1 % bar by chance)
+    soft_from: float = 0.10
+    soft_guard: float | None = 0.003
     # cloth-cloth contact within the garment while sewing and draping (engine.cloth.selfcontact):
     # auto = where parts may come to lie on each other (engine.scene.layers), on, or off
     self_contact: str = "auto"
