@@ -802,6 +802,52 @@ def test_a_seam_pair_straddling_a_leg_meets_on_the_side_its_edges_lie():
     assert not sewing.meet_on.any()
 
 
+def test_a_pair_whose_way_out_crosses_the_body_meets_at_the_nearest_surface():
+    """A sleeve's underarm pair at the armpit end: its midpoint lies just inside the torso's side
+    and its way out (square to the underarm edge) points across the torso. Stepping that way would
+    pull both ends to the far side, farther than they are apart; the pair meets at the surface
+    nearest its midpoint instead (the armpit side)."""
+    from types import SimpleNamespace
+
+    import trimesh
+
+    from engine.cloth.config import Sewing
+    from engine.collide.bvh import MeshBVH
+    from engine.scene.drape import _meet_beside
+
+    torso = trimesh.creation.cylinder(radius=0.15, height=0.6, sections=64)
+    torso.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))  # axis along y
+    body = MeshBVH(np.asarray(torso.vertices), np.asarray(torso.faces))
+    x = np.array([[-0.13, 0.0, 0.12], [-0.13, 0.0, -0.12]])  # 24 cm apart, the midpoint 2 cm inside
+    sewing = Sewing(np.array([[0, 1]]), np.zeros(1, np.bool_), 0.02, 3.0, meet=np.zeros((1, 3)),
+                    meet_on=np.zeros(1, np.bool_))
+    job = SimpleNamespace(body=body, meet_side=np.array([[1.0, 0.0, 0.0]]), tuning=Tuning())
+    _meet_beside(job, x, sewing, np.array([0.24]), weld_gap=0.0075)
+    assert sewing.meet_on[0]
+    margin = Tuning().cloth.tolerance + Tuning().sew.meet_margin
+    np.testing.assert_allclose(sewing.meet[0], [-0.15 - margin, 0.0, 0.0], atol=0.004)  # this side, not +0.15
+
+
+def test_a_pairs_way_out_is_square_to_its_edges():
+    """The way out of a sleeve's underarm pairs is straight down from the underarm edge at every
+    pair, the pair at the armpit end too (from the panel's middle it would point along the sleeve,
+    into the torso)."""
+    from types import SimpleNamespace
+
+    from engine.scene.drape import _Dressing
+
+    xs = np.linspace(0.0, 0.4, 9)
+    grid = np.array([[u, v] for v in np.linspace(0.0, 0.2, 5) for u in xs])  # a 40 x 20 cm panel
+    front = np.column_stack([grid, np.full(len(grid), 0.1)])
+    back = front * [1, 1, -1]
+    under = np.arange(len(xs))  # its bottom row (y = 0)
+    garment = SimpleNamespace(positions=np.concatenate([front, back]), panel=np.repeat([0, 1], len(grid)),
+                              seams=np.column_stack([under, len(grid) + under]), seam_id=np.zeros(len(xs), int))
+    job = _Dressing(garment, None, None, Tuning(), None, None)
+    d = job.meet_side / np.linalg.norm(job.meet_side, axis=1)[:, None]
+    np.testing.assert_allclose(d, np.tile([0.0, -1.0, 0.0], (len(xs), 1)), atol=1e-9)
+
+
 def test_a_stall_beside_a_panel_stretched_far_past_the_fabric_names_that_panel():
     """Sewing that stalls with a cuff's cloth stretched round the arm far past what the fabric
     allows (a cuff cut smaller round than the limb it closes round) names the cuff as too small;
@@ -884,3 +930,15 @@ def test_a_ring_tier_laid_out_tall_hangs_its_width_and_is_not_bunched_up():
     heaped = hung.copy()
     heaped[:n, 1] = 1.0 - 0.3 * (rr - 0.78)
     assert shortest_panel(garment, SimpleNamespace(positions=heaped, vertex_map=vmap))[0] < BUNCHED
+
+
+def test_a_knit_is_guarded_closer_to_its_threshold_than_cotton():
+    """The strain guard holds a knit (jersey: allowed 15 %) 0.3 % past its threshold and cotton
+    0.5 %: the softer cloth overshoots the guard more between its passes, and at 0.5 % jersey
+    drapes ended either side of the threshold + 1 % bar by chance."""
+    from engine.scene.drape import dressing_config
+
+    assert dressing_config(TryOnOptions(fabric="cotton"), Tuning()).strain_guard == pytest.approx(0.005)
+    assert dressing_config(TryOnOptions(fabric="jersey"), Tuning()).strain_guard == pytest.approx(0.003)
+    off = replace(Tuning(), drape=replace(DrapeTuning(), soft_guard=None))
+    assert dressing_config(TryOnOptions(fabric="jersey"), off).strain_guard == pytest.approx(0.005)
