@@ -45,7 +45,7 @@ class ClothParams:
     damping: float = 0.02  # viscous damping per unit mass, 1/s (times mass: the seeds' C_vd, N.s/m)
     spring_damping: float = 0.3  # damping along each spring, a fraction of its critical damping 2 sqrt(k m)
     reflection: float = 0.0  # C_refl of eq. 12 (0: the cloth does not bounce off the body)
-    tolerance: float = 0.005  # m: the collision tolerance band (seed 003 §5.4)
+    tolerance: float = 0.003  # m: the collision tolerance band (seed 003 §5.4: 5 mm; docs/tuning.md)
 
 
 @dataclass
