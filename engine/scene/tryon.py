@@ -403,7 +403,7 @@ PANEL_TALL = 0.15  # m: ... where a panel placed at least this tall ...
 BUNCHED = 0.6  # ... hangs shorter than this share of the length it can hang (hang_warnings) ...
 HUNG_FROM = 0.03  # m: ... reaching from its highest seam (sewn to none: its vertices this near its top)
 TIGHT = 0.01  # a drape stretched past the fabric's threshold by more than this is reported tight
-# (issue 3's quality limit; the strain guard holds a garment that fits at threshold + 0.5 %)
+# (issue 3's quality limit; the strain guard holds a garment that fits at threshold + 0.5 %, a knit 0.3 %)
 CLOSE_FIT_FABRIC = "jersey"  # a pattern file too tight for the default fabric is draped again in this knit
 
 
@@ -459,8 +459,8 @@ def shortest_panel(garment: Garment, res: DrapeResult) -> tuple[float, str, floa
     lesser of its placed height and how far its flat cloth reaches from where it hangs: the seams
     across it that end highest (within HUNG_FROM of the highest: a tier's to the tier above, a
     peplum's to the bodice's pieces, a bodice's shoulder seam; a seam dropping more than half its
-    length runs down the side; a panel sewn across nowhere hangs from its top HUNG_FROM). A ring sector (a circle peplum, a ruffle tier) laid out flat
-    95 cm tall hangs its ring's width, 17 cm."""
+    length runs down the side; a panel sewn across nowhere hangs from its top HUNG_FROM). A ring
+    sector (a circle peplum, a ruffle tier) laid out flat 95 cm tall hangs its ring's width, 17 cm."""
     from scipy.spatial import cKDTree
 
     vmap = res.vertex_map
