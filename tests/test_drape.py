@@ -885,7 +885,7 @@ def test_a_panel_that_rose_into_place_hanging_full_length_is_not_bunched_up():
     y = np.linspace(0.0, 1.0, 11)
     placed = np.column_stack([np.zeros(22), np.concatenate([y - 0.5, y + 0.5]), np.zeros(22)])  # legs, bodice
     garment = SimpleNamespace(positions=placed, uv=placed[:, :2].copy(), panel=np.repeat([0, 1], 11),
-                              panel_names=["pant", "bodice"])
+                              panel_names=["pant", "bodice"], seams=np.zeros((0, 2), int), seam_id=np.zeros(0, int))
     risen = placed.copy()
     risen[:11, 1] += 0.3  # the trousers rose 30 cm into place, full length
     res = SimpleNamespace(positions=risen, vertex_map=np.arange(22))

@@ -329,9 +329,11 @@ def _meet_beside(job: _Dressing, x: np.ndarray, sewing: Sewing, gaps: np.ndarray
     """Open pairs whose midpoint lies inside the body (their straight path runs through it: a leg
     or a shoulder between the two ends) meet just outside the body on the side their edges lie
     on: sewing.meet/meet_on set in place. From the midpoint, the way out is the direction from the
-    two panels' middles to the pair's ends as placed (an inseam lies on the inner side of its
-    leg's panels, a side seam at the side of the torso's, a shoulder seam at the top), square to
-    the gap; the surface is found by stepping along it by the distance to the body. A pair that
+    two panels' middles to the pair's ends as placed, square to their edges (_Dressing.meet_side:
+    an inseam lies on the inner side of its leg's panels, a side seam at the side of the torso's, a
+    shoulder seam at the top), square to the gap; the surface is found by stepping along it by the
+    distance to the body. Where no surface is found that way within the pair's gap (the way out
+    crossed the body), the pair meets at the surface nearest its midpoint. A pair that
     straddles a limb is otherwise pulled straight into it from both sides and stalls there, or
     goes round the wrong side (a trouser leg twisted round its leg)."""
     on = np.flatnonzero(~sewing.welded & (gaps > 2.0 * weld_gap))

@@ -468,8 +468,7 @@ def shortest_panel(garment: Garment, res: DrapeResult) -> tuple[float, str, floa
         return None
     best = None
     y0, y1 = garment.positions[:, 1], res.positions[vmap, 1]
-    seams = getattr(garment, "seams", np.zeros((0, 2), np.int64))
-    sid = getattr(garment, "seam_id", np.zeros(0, np.int64))
+    seams, sid = garment.seams, garment.seam_id
     for p, name in enumerate(garment.panel_names):
         on = garment.panel == p
         if not on.any():
