@@ -15,6 +15,7 @@ from engine.body.motion import BodyTrack
 from engine.body.types import Body
 from engine.cli import app
 from engine.cloth.config import StepConfig
+from engine.cloth.model import ClothParams
 from engine.scene.request import TryOnOptions
 from engine.scene.tuning import Tuning, WalkTuning
 from tests.samples import write_anim_zip
@@ -365,6 +366,9 @@ def test_walk_report_fields(walked):
     assert report["walk"]["map_prerender_seconds"] > 0
     assert report["walk"]["wall_seconds"]["maps_before"] == report["walk"]["map_prerender_seconds"]
     assert report["walk"]["push_time_ms"] == 1000 * WalkTuning().step.push_time
+    # the walk keeps its own, wider collision band (a swinging leg carries cloth further between checks)
+    assert report["walk"]["band_mm"] == pytest.approx(1000 * WalkTuning().tolerance)
+    assert WalkTuning().tolerance > ClothParams().tolerance
 
 
 @pytest.mark.integration
@@ -573,6 +577,7 @@ def test_stiffening_looks_at_a_region_not_at_one_spring(walked):
     (lambda: TryOnOptions.of(walk_stiffness=1.5), "walk_stiffness"),
     (lambda: Tuning(walk=WalkTuning(stiffen_at=0.0)).validate(), "stiffen_at"),
     (lambda: Tuning(walk=WalkTuning(stiffen_springs=0)).validate(), "stiffen_springs"),
+    (lambda: Tuning(walk=WalkTuning(tolerance=0.5)).validate(), "walk tolerance"),
     (lambda: Tuning(collide_every=17).validate(), "collide_every"),
     (lambda: StepConfig(vm_passes=0), "vm_passes"), (lambda: StepConfig(strain_guard=-0.1), "strain_guard"),
     (lambda: StepConfig(flexion_every=0), "flexion_every"), (lambda: StepConfig(flexion_every=17), "flexion_every"),

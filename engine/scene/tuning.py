@@ -112,6 +112,9 @@ class WalkTuning:
     check_travel: float = 0.00175  # m: collisions are checked as often as the body's bulk travels this far ...
     max_check_every: int = 8  # ... at least every this many steps
     friction: float = 1.0  # x the fabric's cloth-body friction
+    # m: the walk's collision band, wider than the drape's: cloth carried by a swinging leg travels
+    # further between two checks than resting cloth, and a 3 mm band let it dip 8-12 mm (docs/tuning.md)
+    tolerance: float = 0.005
     render_ahead: bool = True  # maps rendered one frame ahead in a helper thread
     prerender: bool = True  # a periodic walk's maps all rendered before the walking stage
     step: StepConfig = StepConfig(strain_guard=0.02, flexion_every=8, push_time=0.005, precision="single",
@@ -127,6 +130,8 @@ class WalkTuning:
             raise InputError(f"damping_cap {self.damping_cap}: use 0 .. 1 (x m / (dt degree))")
         if not (0.0 <= self.friction <= 2.0):
             raise InputError(f"friction scale {self.friction}: use 0 .. 2")
+        if not (0.0005 <= self.tolerance <= 0.02):
+            raise InputError(f"walk tolerance {self.tolerance} m: use 0.0005 .. 0.02 (0.5 mm .. 2 cm)")
 
 
 @dataclass(frozen=True)

@@ -133,6 +133,8 @@ def walk_cloth(body: Body, drape: DrapeResult, request: TryOnOptions = TryOnOpti
         """The drape's model at `stiffness` x its springs, the substeps a frame, the step (the
         drape's, scaled as the eq. 4 bound is) and the steps between collision checks."""
         m = with_stiffness(drape.model, stiffness, damping_cap=t.damping_cap)
+        if m.params.tolerance != t.tolerance:
+            m = replace(m, params=replace(m.params, tolerance=t.tolerance))
         dt_max = drape.dt * m.dt_bound / drape.model.dt_bound
         n_sub = max(1, math.ceil(frame_time / dt_max - 1e-9))
         ev = tuning.collide_every if tuning.collide_every is not None else check_every(track, frame_time / n_sub, t)
@@ -203,6 +205,7 @@ def walk_cloth(body: Body, drape: DrapeResult, request: TryOnOptions = TryOnOpti
         "flexion_every": step.flexion_every,  # steps between the flexion (and held shear) springs' forces
         "contact_rounds": step.contact_rounds,
         "push_time_ms": step.push_time * 1000,
+        "band_mm": model.params.tolerance * 1000,  # the collision band the cloth kept while walking
         "strain_guard": step.strain_guard,
         "velocity_mode": step.velocity_mode,
         "realtime_factor": sim_seconds / max(wall_walk, 1e-9),
@@ -238,7 +241,7 @@ def _walk_collider(body: Body, drape: DrapeResult, track: BodyTrack, request: Tr
     from engine.collide.maps import MapRenderer
     from engine.collide.moving import TrackCollider, TrackObjectCollider
 
-    tol = drape.model.params.tolerance
+    tol = t.tolerance
     if request.collision == "object":
         left.append("collision maps, because object-space collision (a BVH refitted every frame) was chosen")
         return TrackObjectCollider(track, tol=tol), None
