@@ -81,6 +81,8 @@ def run_target(name: str, n: int, seconds: float, out: Path) -> dict:
     seeds = target.seeds()
     for s in seeds:  # warm: imports, caches, compiled kernels are not the inputs' cost
         _classify(target, s)
+    if target.warm is not None:
+        target.warm()
     cap = _vm_size() + MEMORY_CAP
     resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
     counts, worst, failures, t_end = Counter(), [0.0, ""], [], time.monotonic() + seconds
