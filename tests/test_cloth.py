@@ -999,7 +999,7 @@ def test_force_pass_matches_a_direct_sum(single, held, tol):
     scale_f = np.abs(f).max()
     assert np.abs(solver.f - f).max() <= tol * scale_f
     assert np.abs(v_after - (v + dt * f * m.inv_mass[:, None])).max() <= tol * dt * scale_f * m.inv_mass.max()
-    limit = (1 + m.fabric.strain_threshold) * m.rest
+    limit = (1 + m.fabric.strain_threshold) * m.limit_rest
     over = np.flatnonzero((m.kind != FLEXION) & (length > limit))
     assert len(over) > 10
     listed = solver.buf.work[:n_over]
@@ -1094,12 +1094,12 @@ def test_guard_positions_is_the_plain_guard_bit_for_bit(garment):
     thr = m.fabric.strain_threshold + 0.02
     x1, v1, w1 = x0.copy(), v0.copy(), np.zeros(len(m.springs), np.int32)
     active = m.kind != FLEXION
-    n1 = KS.provot_positions(x1, m.springs, m.rest, active, thr, m.inv_mass, 6, w1, True, contact, normal, 0.0003)
+    n1 = KS.provot_positions(x1, m.springs, m.limit_rest, active, thr, m.inv_mass, 6, w1, True, contact, normal, 0.0003)
     assert n1 > 50
     KS.inelastic_guard(x1, x0, v1)
     solver = ClothSolver(m)
     x2, v2, r = x0.copy(), v0.copy(), m.runs
-    n2 = KS.guard_positions(x2, v2, m.springs, m.rest, active, thr, m.inv_mass, 6, solver.buf.work, contact, normal,
+    n2 = KS.guard_positions(x2, v2, m.springs, m.limit_rest, active, thr, m.inv_mass, 6, solver.buf.work, contact, normal,
                            0.0003, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run, limits2(solver.model, thr)[solver.buf.runs.fast.perm], solver.buf.soa,
                            solver.buf.listed, solver.buf.listed_words, m.adj_ptr, m.adj_spring, solver.buf.x_guard,
                            solver.buf.saved, solver.buf.saved_list)
@@ -1110,7 +1110,7 @@ def test_guard_positions_is_the_plain_guard_bit_for_bit(garment):
     assert not solver.buf.listed.any() and not solver.buf.saved.any()
     # nothing long: nothing moves
     x3, v3 = garment.positions.copy(), v0.copy()
-    assert KS.guard_positions(x3, v3, m.springs, m.rest, active, thr, m.inv_mass, 6, solver.buf.work, contact, normal,
+    assert KS.guard_positions(x3, v3, m.springs, m.limit_rest, active, thr, m.inv_mass, 6, solver.buf.work, contact, normal,
                              0.0003, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run, limits2(solver.model, thr)[solver.buf.runs.fast.perm], solver.buf.soa,
                              solver.buf.listed, solver.buf.listed_words, m.adj_ptr, m.adj_spring, solver.buf.x_guard,
                              solver.buf.saved, solver.buf.saved_list) == 0
@@ -1125,8 +1125,9 @@ def test_the_late_guard_finds_and_makes_what_guard_positions_does(garment):
     unevenly, some points touching a body -- and then the listed springs whose ends moved are
     measured again (one no longer long is left alone: excess -1e30; so may be, in double, one
     whose end the guard looked at and did not move); the flag and point buffers are clear
-    afterwards."""
-    m = _model(garment)
+    afterwards. (Every spring measured from its rest length, bias None: the diagonals near their
+    limit too, so that some listed springs end short of it.)"""
+    m = replace(_model(garment), bias=None)
     x0, v0, contact, normal = _stretched(garment, [1.05, 1.0, 1.0], 0.0005)
     solver = ClothSolver(m, config=StepConfig(strain_guard=0.02, precision="single", hold_shear=True,
                                               late_guard=True))
@@ -1142,18 +1143,18 @@ def test_the_late_guard_finds_and_makes_what_guard_positions_does(garment):
     near = solver.buf.near[:solver._n_near]
     assert 0 < len(near) < n_over and np.all(np.diff(near) > 0)
     ln = np.linalg.norm(x0[m.springs[listed, 1]] - x0[m.springs[listed, 0]], axis=1)
-    assert set(np.flatnonzero(ln > (1.0 + thr) * m.rest[listed])) <= set(near)
-    assert np.all(ln[near] > (1.0 + m.fabric.strain_threshold + 0.0099) * m.rest[listed[near]])
+    assert set(np.flatnonzero(ln > (1.0 + thr) * m.limit_rest[listed])) <= set(near)
+    assert np.all(ln[near] > (1.0 + m.fabric.strain_threshold + 0.0099) * m.limit_rest[listed[near]])
     x1, v1, w1 = state.x.copy(), state.v.copy(), np.zeros(len(m.springs), np.int32)
     plain = ClothSolver(m)
     r, pb = plain.buf.runs, plain.buf
     active = m.kind != FLEXION
-    n1 = KS.guard_positions(x1, v1, m.springs, m.rest, active, thr, m.inv_mass, 6, w1, contact, normal,
+    n1 = KS.guard_positions(x1, v1, m.springs, m.limit_rest, active, thr, m.inv_mass, 6, w1, contact, normal,
                            0.0003, r.fast.perm, r.fast.runs, r.fast.springs, r.n_run, limits2(m, thr)[r.fast.perm],
                            pb.soa, pb.listed, pb.listed_words, m.adj_ptr, m.adj_spring, pb.x_guard, pb.saved,
                            pb.saved_list)
     assert n1 > 10
-    n2 = KS.guard_listed(state.x, state.v, m.springs, m.rest, active, thr, m.inv_mass, 6, solver.buf.guard_work,
+    n2 = KS.guard_listed(state.x, state.v, m.springs, m.limit_rest, active, thr, m.inv_mass, 6, solver.buf.guard_work,
                         contact, normal, 0.0003, solver.buf.listed, solver.buf.listed_words, m.adj_ptr, m.adj_spring,
                         solver.buf.x_guard, solver.buf.saved, solver.buf.saved_list, solver.buf.work, solver.buf.geo,
                         solver.buf.ends, n_over, solver.buf.near, solver._n_near, limits2(solver.model, thr),
@@ -1171,7 +1172,7 @@ def test_the_late_guard_finds_and_makes_what_guard_positions_does(garment):
     geo = solver.buf.geo[:n_over]
     d = x1[b] - x1[a]
     length = np.linalg.norm(d, axis=1)
-    excess = length - (1.0 + m.fabric.strain_threshold) * m.rest[listed]
+    excess = length - (1.0 + m.fabric.strain_threshold) * m.limit_rest[listed]
     fresh = np.where((excess > 0)[:, None], np.column_stack([d / length[:, None], excess]), -1e30)
     close = lambda g, h: np.all(np.abs(g - h) <= 1e-12, axis=1) | ((g[:, 3] == -1e30) & (h[:, 3] == -1e30))
     kept = np.all(geo == geo_before, axis=1)
@@ -1379,3 +1380,43 @@ def test_a_point_deep_in_the_band_moves_out_over_the_push_time(push_time):
                                     np.zeros((0, 3), np.int32), tol, 0.0, 0.4, 1e-4, contact, contact_n, vb, 1.0 / push_time)
         assert hits == 1 and contact[0]
         np.testing.assert_allclose(v[0], [0.0, want, 0.0], rtol=1e-12, atol=1e-15)
+
+
+def _sheared(garment, degrees: float) -> np.ndarray:
+    """The flat square with its weft turned `degrees` toward the warp: every yarn keeps its
+    length, only the angle between them changes (pure in-plane shear)."""
+    g = math.radians(degrees)
+    u, v = garment.uv[:, 0], garment.uv[:, 1]
+    return np.stack([u + v * math.sin(g), 1.0 + v * math.cos(g), np.zeros_like(u)], axis=1)
+
+
+def test_cotton_shears_freely_up_to_its_locking_angle(model, garment):
+    """A woven fabric takes a curved shape by shearing (its yarns turn about their crossings)
+    until the weave locks (Fabric.shear_lock, 30 degrees for cotton): sheared 20 degrees, no yarn
+    is longer and the strain limit leaves it alone, though its diagonals are 16 % long; sheared
+    50 degrees, it reads as strained and the limit brings the diagonals back to their longest
+    (the yarns at the threshold, the weave locked)."""
+    solver = ClothSolver(model, None, StepConfig(), dt=0.5 * model.dt_bound)
+    s, rest = model.springs, model.rest
+    yarn = (model.kind != FLEXION) & (model.bias < 1e-9)
+    diag = (model.kind != FLEXION) & (model.bias > 1 - 1e-9)
+    assert yarn.sum() > 0 and diag.sum() > 0 and (model.kind[diag] == SHEAR).any()
+    thr = model.fabric.strain_threshold
+    x = _sheared(garment, 20.0)
+    length = np.linalg.norm(x[s[:, 1]] - x[s[:, 0]], axis=1)
+    assert np.allclose(length[yarn], rest[yarn])
+    assert (length[diag] / rest[diag]).max() == pytest.approx(math.sqrt(1 + math.sin(math.radians(20))), rel=1e-6)
+    assert solver.max_strain(ClothState(x, np.zeros_like(x))) <= 1e-9
+    before = x.copy()
+    work = np.zeros(len(s), np.int32)
+    args = (s, model.limit_rest, model.strain_limited, thr, model.inv_mass, 8, work, False,
+            np.zeros(model.n, np.bool_), np.zeros((model.n, 3)))
+    assert KS.provot_positions(x, *args) == 0 and np.array_equal(x, before)
+    x = _sheared(garment, 50.0)
+    assert solver.max_strain(ClothState(x, np.zeros_like(x))) > thr
+    assert KS.provot_positions(x, *args) > 0
+    for _ in range(50):  # (Provot's passes converge slowly where springs share ends)
+        KS.provot_positions(x, *args)
+    longest = (1 + thr) * math.sqrt(1 + math.sin(math.radians(model.fabric.shear_lock)))
+    after = np.linalg.norm(x[s[diag, 1]] - x[s[diag, 0]], axis=1) / rest[diag]
+    assert longest * 0.97 < after.max() < longest * 1.01

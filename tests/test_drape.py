@@ -165,8 +165,10 @@ def test_a_stalled_flat_layout_is_sewn_again_within_half_a_second():
     together (SewTuning.far_together), and so it does when the pairs whose path runs through the
     arm meet beside it (SewTuning.meet_outside). Without either, each pulled at 3 m/s as before, its sleeve seams stall ~9 cm
     open from ~0.15 s on: with a second pull to come, the stall is judged over
-    SewTuning.retry_stall windows, so it is sewn again after ~0.5 s of sewing, not after 1 s
-    (progress reports come every 5 ms of simulated time while sewing), and then sews and drapes."""
+    SewTuning.retry_stall windows, so it is sewn again after 0.5-1 s of sewing (0.5 s at the
+    earliest; later while the gap still shrinks a millimetre a window now and then), not after
+    snap_after's 2 s (progress reports come every 5 ms of simulated time while sewing), and then
+    sews and drapes."""
     from engine.body import resolve_body
     from engine.scene.garments import resolve_garment
     from engine.scene.tryon import run_tryon
@@ -186,7 +188,7 @@ def test_a_stalled_flat_layout_is_sewn_again_within_half_a_second():
         else:
             assert len(again) == 1
             first = sum(1 for stage, m in said[:again[0]] if stage == "sewing" and m.startswith("largest open seam gap"))
-            assert 0.45 <= first * 0.005 <= 0.6, first
+            assert 0.45 <= first * 0.005 <= 1.0, first
         assert rep["seam_gap_mm"]["snapped"] == 0 and rep["settled"] and rep["strain"]["max"] <= 0.06
 
 
@@ -866,7 +868,8 @@ def test_a_stall_beside_a_panel_stretched_far_past_the_fabric_names_that_panel()
     x[30:, 0] += 0.01  # ... one spring 100 % long
     garment = SimpleNamespace(panel=np.repeat([0, 1], 20), seams=np.array([[0, 20]]), panel_names=["cuff", "sleeve"])
     job = SimpleNamespace(garment=garment, request=TryOnOptions(fabric="cotton"), tuning=Tuning())
-    model = SimpleNamespace(springs=np.concatenate([springs, [[0, 2]]]), rest=np.concatenate([rest, [0.02]]),
+    rest = np.concatenate([rest, [0.02]])  # (straight chains: no shear, measured from their rest)
+    model = SimpleNamespace(springs=np.concatenate([springs, [[0, 2]]]), rest=rest, limit_rest=rest,
                             kind=np.array([STRUCTURAL] * 38 + [FLEXION]))
     said = _too_small_panels(job, model, SimpleNamespace(x=x), np.zeros(1, dtype=bool))
     assert said is not None and "'cuff' 40 %" in said and "sleeve" not in said, said

@@ -90,7 +90,7 @@ class StepBuffers:
 def spring_props(model: ClothModel, runs: SpringRuns, dtype) -> np.ndarray:
     """(4, S) rest, stiffness, damping and listing length (inf: not limited) in the force pass's
     order and precision."""
-    limit = np.where(model.strain_limited, (1.0 + model.fabric.strain_threshold) * model.rest, np.inf)
+    limit = np.where(model.strain_limited, (1.0 + model.fabric.strain_threshold) * model.limit_rest, np.inf)
     return np.ascontiguousarray(np.stack([model.rest, model.stiffness, model.spring_c, limit])[:, runs.perm],
                                 dtype=dtype)
 
@@ -99,5 +99,5 @@ def limits2(model: ClothModel, threshold: float) -> np.ndarray:
     """By model index: a hair below the squared length at which a spring passes `threshold` -- a
     superset of the long ones, whatever the rounding -- and inf for springs the strain limit
     leaves alone."""
-    lim = (1.0 + threshold) * model.rest
+    lim = (1.0 + threshold) * model.limit_rest
     return np.where(model.strain_limited, lim * lim * (1.0 - 1e-9), np.inf)

@@ -18,6 +18,14 @@ Sources (typical values; real bolts vary by +-30 %):
   ~0.4-0.6 for denim and knits.
 - Strain thresholds for the velocity modification (seed 003 §4.3 uses 1-15 % by fabric type):
   about the strain a garment shows in wear — small for woven fabrics, larger for knits.
+- Shear locking angle (`shear_lock`): a woven fabric shears freely -- its yarns turn about their
+  crossings, which is how it takes a doubly curved shape (bust, shoulder, hip) without stretching
+  -- until the yarns jam, in picture-frame and bias-extension tests typically at 30-45 degrees
+  for plain weaves, earlier for dense ones (denim); knit loops turn further. The strain limit
+  measures a spring at phi to the yarns from the length that shear gives it, sqrt(1 + |sin 2 phi|
+  sin angle) x rest (a diagonal at 30 degrees: 22.5 % longer; engine.cloth.model.limit_rest), not
+  from its rest length: 5 % on a diagonal is 6 degrees of shear, and a cotton that could shear no
+  more could not wrap an armpit or a bust without stretching its yarns.
 - Elastane (spandex, Lycra) knits, `stretch_knit`: leggings, swimwear, activewear. Elastane raises
   a single jersey's area density by 23-63 % over the same jersey without it (Akter et al.,
   "Performance analysis of spandex incorporated single jersey fabrics for sportswear", Indian J.
@@ -58,6 +66,7 @@ class Fabric:
     bending: float  # N.m, bending rigidity per unit width
     friction: float  # cloth-skin Coulomb friction coefficient (dimensionless)
     strain_threshold: float  # velocity modification threshold (fraction, seed 003 §4.3)
+    shear_lock: float = 30.0  # degrees: the in-plane shear at which the weave jams (see the module doc)
     note: str = ""
 
 
@@ -65,15 +74,15 @@ FABRICS: dict[str, Fabric] = {
     f.name: f
     for f in (
         Fabric("cotton", density=0.120, stretch=490 / 0.045, shear=0.9 * G_UNIT, bending=0.10 * GF_CM2_PER_CM,
-               friction=0.40, strain_threshold=0.05, note="cotton shirting/poplin, 120 g/m^2"),
+               friction=0.40, strain_threshold=0.05, shear_lock=30.0, note="cotton shirting/poplin, 120 g/m^2"),
         Fabric("denim", density=0.420, stretch=490 / 0.035, shear=2.5 * G_UNIT, bending=1.0 * GF_CM2_PER_CM,
-               friction=0.50, strain_threshold=0.03, note="12.5 oz/yd^2 denim, 420 g/m^2"),
+               friction=0.50, strain_threshold=0.03, shear_lock=25.0, note="12.5 oz/yd^2 denim, 420 g/m^2"),
         Fabric("silk", density=0.075, stretch=490 / 0.05, shear=0.4 * G_UNIT, bending=0.025 * GF_CM2_PER_CM,
-               friction=0.25, strain_threshold=0.05, note="17.5 momme silk charmeuse, 75 g/m^2"),
+               friction=0.25, strain_threshold=0.05, shear_lock=35.0, note="17.5 momme silk charmeuse, 75 g/m^2"),
         Fabric("jersey", density=0.180, stretch=490 / 0.35, shear=0.3 * G_UNIT, bending=0.04 * GF_CM2_PER_CM,
-               friction=0.50, strain_threshold=0.15, note="cotton single jersey knit, 180 g/m^2"),
+               friction=0.50, strain_threshold=0.15, shear_lock=40.0, note="cotton single jersey knit, 180 g/m^2"),
         Fabric("stretch_knit", density=0.230, stretch=490 / 0.80, shear=0.2 * G_UNIT, bending=0.03 * GF_CM2_PER_CM,
-               friction=0.50, strain_threshold=0.40, note="cotton or nylon/elastane jersey (leggings), 230 g/m^2"),
+               friction=0.50, strain_threshold=0.40, shear_lock=45.0, note="cotton or nylon/elastane jersey (leggings), 230 g/m^2"),
     )
 }
 

@@ -71,6 +71,9 @@ class ClothModel:
     params: ClothParams
     dt_bound: float
     edge_length: float
+    # (S,) |sin 2 phi| of each spring's direction phi on the flat pattern against the mesh's grid
+    # (the yarns): 0 along a yarn, 1 on the bias; how far shear can lengthen it (limit_rest)
+    bias: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -81,6 +84,18 @@ class ClothModel:
         """(S,) bool: the springs the strain limit applies to (flexion springs shorten and
         lengthen with folds)."""
         return self.kind != FLEXION
+
+    @cached_property
+    def limit_rest(self) -> np.ndarray:
+        """(S,) the lengths the strain limit and the reported strain measure each spring from:
+        the longest it can be with its yarns unstretched, the weave sheared up to where it locks
+        (Fabric.shear_lock; engine.cloth.fabrics): a spring at phi to the yarns lengthens by
+        sqrt(1 + |sin 2 phi| sin angle) under a shear of that angle -- a yarn not at all, a
+        diagonal (the shear springs) 22.5 % at 30 degrees. Strain past it stretches yarns."""
+        if self.bias is None:
+            return self.rest
+        lock = np.sin(np.radians(self.fabric.shear_lock))
+        return np.where(self.kind == FLEXION, self.rest, self.rest * np.sqrt(1.0 + self.bias * lock))
 
     @cached_property
     def runs(self) -> "SpringRuns":
@@ -319,7 +334,9 @@ def build_model(uv: np.ndarray, panel: np.ndarray, lattice: np.ndarray, quads: n
     if np.any(mass <= 0):
         raise InputError("the cloth mesh has vertices that belong to no face")
     mass = np.maximum(mass, MASS_FLOOR * np.median(mass))
-    return _assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, h)
+    d = uv[b] - uv[a]
+    bias = np.where(kind == FLEXION, 0.0, np.abs(2.0 * d[:, 0] * d[:, 1]) / (rest * rest))
+    return _biased(_assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, h), bias)
 
 
 def spring_stiffness(kind: np.ndarray, fabric: Fabric, params: ClothParams, h: float) -> np.ndarray:
@@ -353,6 +370,12 @@ def _assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, 
                       seams=seams, fabric=fabric, params=params, dt_bound=dt_bound, edge_length=h)
 
 
+def _biased(model: ClothModel, bias: np.ndarray | None) -> ClothModel:
+    """The model with its springs' bias (ClothModel.bias), set before limit_rest is first read."""
+    model.bias = bias
+    return model
+
+
 def with_stiffness(model: ClothModel, factor: float, damping_cap: float | None = None) -> ClothModel:
     """The model with its stretch and shear springs `factor` x as stiff (flexion unchanged: it is
     the fabric's bending), the spring damping and the eq. 4 bound following (dt ~ 1 / sqrt(factor)
@@ -366,8 +389,9 @@ def with_stiffness(model: ClothModel, factor: float, damping_cap: float | None =
         return model
     k = np.where(model.kind == FLEXION, model.stiffness, model.stiffness * factor)
     params = replace(model.params, stiffness_scale=model.params.stiffness_scale * factor)
-    return _assemble(model.mass, model.springs, model.rest, k, model.kind, model.quads, model.tris, model.seams,
-                     model.fabric, params, model.edge_length, DAMPING_CAP if damping_cap is None else damping_cap)
+    return _biased(_assemble(model.mass, model.springs, model.rest, k, model.kind, model.quads, model.tris,
+                             model.seams, model.fabric, params, model.edge_length,
+                             DAMPING_CAP if damping_cap is None else damping_cap), model.bias)
 
 
 def seam_flexion(uv: np.ndarray, springs: np.ndarray, kind: np.ndarray, rest: np.ndarray,
@@ -426,6 +450,7 @@ def weld_model(model: ClothModel, vertex_map: np.ndarray, uv: np.ndarray | None 
     s = vertex_map[model.springs]
     keep = s[:, 0] != s[:, 1]
     s, rest, k, kind = s[keep], model.rest[keep], model.stiffness[keep], model.kind[keep]
+    bias = model.bias[keep] if model.bias is not None else None
     key = np.sort(s, axis=1)
     _, first, group = np.unique(_pair_keys(key), return_index=True, return_inverse=True)
     # a spring on both sides of a seam: where the stitched edges differ a little (eased in), the
@@ -440,6 +465,7 @@ def weld_model(model: ClothModel, vertex_map: np.ndarray, uv: np.ndarray | None 
     order = np.argsort(first)
     first, longest = first[order], longest[order]
     s, rest, k, kind = s[first], longest, k[first], kind[first]
+    bias = bias[first] if bias is not None else None
     if uv is not None and len(model.seams):
         fs, fr = seam_flexion(uv, model.springs, model.kind, model.rest, model.seams)
         fs = np.sort(vertex_map[fs], axis=1)
@@ -452,6 +478,7 @@ def weld_model(model: ClothModel, vertex_map: np.ndarray, uv: np.ndarray | None 
             rest = np.concatenate([rest, fr[new]])
             kind = np.concatenate([kind, fk])
             k = np.concatenate([k, spring_stiffness(fk, model.fabric, model.params, model.edge_length)])
-    return _assemble(mass, s.astype(np.int32), rest, k, kind,
-                     vertex_map[model.quads].astype(np.int32), vertex_map[model.tris].astype(np.int32),
-                     np.zeros((0, 2), np.int32), model.fabric, model.params, model.edge_length)
+            bias = np.concatenate([bias, np.zeros(len(new))]) if bias is not None else None
+    return _biased(_assemble(mass, s.astype(np.int32), rest, k, kind,
+                             vertex_map[model.quads].astype(np.int32), vertex_map[model.tris].astype(np.int32),
+                             np.zeros((0, 2), np.int32), model.fabric, model.params, model.edge_length), bias)

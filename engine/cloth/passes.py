@@ -47,7 +47,7 @@ def modify_velocities(model: ClothModel, state: ClothState, buf: StepBuffers, co
                       gravity: np.ndarray, dt: float, recover: float, n_listed: int) -> int:
     """The velocity modification against super-elasticity (seed 003 §4.3, seed 000 eq. 5/6) over
     the n_listed springs the force pass listed; returns their count."""
-    return KS.modify_velocities(state.x, state.v, model.springs, model.rest, model.strain_limited,
+    return KS.modify_velocities(state.x, state.v, model.springs, model.limit_rest, model.strain_limited,
                                 model.fabric.strain_threshold, config.mode, gravity, dt, buf.body_v,
                                 config.vm_passes, buf.work, buf.geo, buf.ends, recover, n_listed)
 
@@ -100,7 +100,7 @@ def integrate(state: ClothState, buf: StepBuffers, dt: float, hold_contacts: boo
 def provot(model: ClothModel, state: ClothState, buf: StepBuffers, config: StepConfig) -> int:
     """Provot's position modification (the comparison mode): springs past the strain limit
     shortened back to it; returns how many were."""
-    return KS.provot_positions(state.x, model.springs, model.rest, model.strain_limited,
+    return KS.provot_positions(state.x, model.springs, model.limit_rest, model.strain_limited,
                                model.fabric.strain_threshold, model.inv_mass, config.vm_passes, buf.work, False,
                                buf.contact, buf.contact_n, np.inf)
 
@@ -110,7 +110,7 @@ def guard(model: ClothModel, state: ClothState, buf: StepBuffers, config: StepCo
     (never into the body), the moved points' velocity back against the move taken away; returns
     the springs it shortened."""
     r = buf.runs.fast
-    return KS.guard_positions(state.x, state.v, model.springs, model.rest, model.strain_limited,
+    return KS.guard_positions(state.x, state.v, model.springs, model.limit_rest, model.strain_limited,
                               _guard_threshold(model, config), model.inv_mass, config.vm_passes, buf.work,
                               buf.contact, buf.contact_n, config.guard_step, r.perm, r.runs, r.springs, r.n_run,
                               buf.guard_lim2, buf.soa, buf.listed, buf.listed_words, model.adj_ptr, model.adj_spring,
@@ -122,7 +122,7 @@ def guard_listed(model: ClothModel, state: ClothState, buf: StepBuffers, config:
     """The strain guard of `guard`, the same positions bit for bit, found from the force pass's
     list (the late guard: run right after the next step's force pass); the listed springs it
     moved are measured again for the velocity modification."""
-    return KS.guard_listed(state.x, state.v, model.springs, model.rest, model.strain_limited,
+    return KS.guard_listed(state.x, state.v, model.springs, model.limit_rest, model.strain_limited,
                            _guard_threshold(model, config), model.inv_mass, config.vm_passes, buf.guard_work,
                            buf.contact, buf.contact_n, config.guard_step, buf.listed, buf.listed_words,
                            model.adj_ptr, model.adj_spring, buf.x_guard, buf.saved, buf.saved_list, buf.work,

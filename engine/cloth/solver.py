@@ -206,4 +206,4 @@ class ClothSolver:
         return float(kinetic_energy(state.v, self.model.mass))
 
     def max_strain(self, state: ClothState) -> float:
-        return float(max_strain(state.x, self.model.springs, self.model.rest, self.model.strain_limited))
+        return float(max_strain(state.x, self.model.springs, self.model.limit_rest, self.model.strain_limited))

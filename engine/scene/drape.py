@@ -433,7 +433,7 @@ def _too_small_panels(job: _Dressing, model: ClothModel, state: ClothState, weld
     g = job.garment
     limit = get_fabric(job.request.fabric).strain_threshold + job.tuning.drape.too_tight
     s = model.springs[model.kind != FLEXION]
-    strain = np.linalg.norm(state.x[s[:, 1]] - state.x[s[:, 0]], axis=1) / model.rest[model.kind != FLEXION] - 1.0
+    strain = np.linalg.norm(state.x[s[:, 1]] - state.x[s[:, 0]], axis=1) / model.limit_rest[model.kind != FLEXION] - 1.0
     found = []
     for p in np.unique(g.panel[g.seams[~welded].ravel()]):
         on = (g.panel[s[:, 0]] == p) & (g.panel[s[:, 1]] == p)
@@ -570,7 +570,7 @@ def _edge(g: Garment) -> float:
 def most_stretched(x: np.ndarray, model: ClothModel) -> tuple[float, np.ndarray]:
     """(strain, midpoint (3,)) of the most stretched structural or shear spring."""
     s = model.springs[model.kind != FLEXION]
-    r = model.rest[model.kind != FLEXION]
+    r = model.limit_rest[model.kind != FLEXION]
     a, b = x[s[:, 0]], x[s[:, 1]]
     k = int(np.argmax(np.linalg.norm(b - a, axis=1) / r))
     return float(np.linalg.norm(b[k] - a[k]) / r[k] - 1.0), 0.5 * (a[k] + b[k])

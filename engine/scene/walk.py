@@ -275,7 +275,7 @@ def spread_strain(model, x: np.ndarray, n: int) -> float:
     s = model.springs[model.strain_limited]
     if len(s) == 0:
         return 0.0
-    strain = np.linalg.norm(x[s[:, 1]] - x[s[:, 0]], axis=1) / model.rest[model.strain_limited] - 1.0
+    strain = np.linalg.norm(x[s[:, 1]] - x[s[:, 0]], axis=1) / model.limit_rest[model.strain_limited] - 1.0
     n = min(n, len(strain))
     return float(np.partition(strain, len(strain) - n)[len(strain) - n])
 
