@@ -160,7 +160,7 @@ def test_flat_panels_whose_seams_stop_closing_are_sewn_again_gently():
                   Tuning(sew=SewTuning(vmax=0.05, far_retry_vmax=0.06, budget=0.3)), place=place, source=name)
 
 
-def test_a_stalled_flat_layout_is_sewn_again_within_half_a_second():
+def test_a_stalled_flat_layout_is_sewn_again_within_a_second():
     """GarmentCode's T-shirt on its own body sews in one pull now that a flat layout's pairs close
     together (SewTuning.far_together), and so it does when the pairs whose path runs through the
     arm meet beside it (SewTuning.meet_outside). Without either, each pulled at 3 m/s as before, its sleeve seams stall ~9 cm

@@ -367,8 +367,9 @@ def test_walk_report_fields(walked):
     assert report["walk"]["wall_seconds"]["maps_before"] == report["walk"]["map_prerender_seconds"]
     assert report["walk"]["push_time_ms"] == 1000 * WalkTuning().step.push_time
     # the walk keeps its own, wider collision band (a swinging leg carries cloth further between checks)
-    assert report["walk"]["band_mm"] == pytest.approx(1000 * WalkTuning().tolerance)
-    assert WalkTuning().tolerance > ClothParams().tolerance
+    assert report["walk"]["band_mm"] == pytest.approx({"cloth": 1000 * WalkTuning().tolerance,
+                                                      "body": 1000 * WalkTuning().tolerance})
+    assert WalkTuning().tolerance > ClothParams().tolerance  # (wider than the drape's)
 
 
 @pytest.mark.integration

@@ -22,10 +22,11 @@ Sources (typical values; real bolts vary by +-30 %):
   crossings, which is how it takes a doubly curved shape (bust, shoulder, hip) without stretching
   -- until the yarns jam, in picture-frame and bias-extension tests typically at 30-45 degrees
   for plain weaves, earlier for dense ones (denim); knit loops turn further. The strain limit
-  measures a spring at phi to the yarns from the length that shear gives it, sqrt(1 + |sin 2 phi|
-  sin angle) x rest (a diagonal at 30 degrees: 22.5 % longer; engine.cloth.model.limit_rest), not
-  from its rest length: 5 % on a diagonal is 6 degrees of shear, and a cotton that could shear no
-  more could not wrap an armpit or a bust without stretching its yarns.
+  measures a quad's diagonal from the length that shear gives it, sqrt(1 + sin angle) x rest (at
+  30 degrees 22.5 % longer; engine.cloth.model.limit_rest), not from its rest length: 5 % on a
+  diagonal is 6 degrees of shear, and a cotton that could shear no more could not wrap an armpit
+  or a bust without stretching its yarns. (A border triangle's slanted edge keeps the plain
+  limit: no yarn beside it would hold the yarns' stretch.)
 - Elastane (spandex, Lycra) knits, `stretch_knit`: leggings, swimwear, activewear. Elastane raises
   a single jersey's area density by 23-63 % over the same jersey without it (Akter et al.,
   "Performance analysis of spandex incorporated single jersey fabrics for sportswear", Indian J.

@@ -71,8 +71,9 @@ class ClothModel:
     params: ClothParams
     dt_bound: float
     edge_length: float
-    # (S,) |sin 2 phi| of each spring's direction phi on the flat pattern against the mesh's grid
-    # (the yarns): 0 along a yarn, 1 on the bias; how far shear can lengthen it (limit_rest)
+    # (S,) |sin 2 phi| of each shear spring's direction phi on the flat pattern against the mesh's
+    # grid (the yarns): 1 for a quad's diagonal; 0 for the other springs; how far shear can
+    # lengthen it (limit_rest)
     bias: np.ndarray | None = None
 
     @property
@@ -89,9 +90,9 @@ class ClothModel:
     def limit_rest(self) -> np.ndarray:
         """(S,) the lengths the strain limit and the reported strain measure each spring from:
         the longest it can be with its yarns unstretched, the weave sheared up to where it locks
-        (Fabric.shear_lock; engine.cloth.fabrics): a spring at phi to the yarns lengthens by
-        sqrt(1 + |sin 2 phi| sin angle) under a shear of that angle -- a yarn not at all, a
-        diagonal (the shear springs) 22.5 % at 30 degrees. Strain past it stretches yarns."""
+        (Fabric.shear_lock; engine.cloth.fabrics): a quad's diagonal at phi to the yarns lengthens
+        by sqrt(1 + |sin 2 phi| sin angle) under a shear of that angle (22.5 % at 30 degrees);
+        every other spring (bias 0) from its rest length. Strain past it stretches yarns."""
         if self.bias is None:
             return self.rest
         lock = np.sin(np.radians(self.fabric.shear_lock))
@@ -334,8 +335,10 @@ def build_model(uv: np.ndarray, panel: np.ndarray, lattice: np.ndarray, quads: n
     if np.any(mass <= 0):
         raise InputError("the cloth mesh has vertices that belong to no face")
     mass = np.maximum(mass, MASS_FLOOR * np.median(mass))
+    # only a quad's diagonals: its edges are yarns that hold the threshold; a border triangle's
+    # slanted edge has no yarn beside it, and lengthening it would let the yarns stretch unseen
     d = uv[b] - uv[a]
-    bias = np.where(kind == FLEXION, 0.0, np.abs(2.0 * d[:, 0] * d[:, 1]) / (rest * rest))
+    bias = np.where(kind == SHEAR, np.abs(2.0 * d[:, 0] * d[:, 1]) / (rest * rest), 0.0)
     return _biased(_assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, h), bias)
 
 
@@ -465,7 +468,10 @@ def weld_model(model: ClothModel, vertex_map: np.ndarray, uv: np.ndarray | None 
     order = np.argsort(first)
     first, longest = first[order], longest[order]
     s, rest, k, kind = s[first], longest, k[first], kind[first]
-    bias = bias[first] if bias is not None else None
+    if bias is not None:  # a spring on both sides of a seam: the lesser bias (the stricter limit)
+        least = np.full(len(first), np.inf)
+        np.minimum.at(least, group.ravel(), bias)
+        bias = least[order]
     if uv is not None and len(model.seams):
         fs, fr = seam_flexion(uv, model.springs, model.kind, model.rest, model.seams)
         fs = np.sort(vertex_map[fs], axis=1)

@@ -123,11 +123,12 @@ def lower_arms(lift: ArmLift, res: DrapeResult, request: TryOnOptions, tuning: T
     t0 = time.perf_counter()
     # part of dressing, held to the drape's strain bar: the walk's step in double precision with the
     # drape's strain limit and guard, every step checked, without friction (the arms slide past the
-    # cloth), maps of every frame, the drape's stiffness
+    # cloth), maps of every frame, the drape's stiffness and collision band
     d = tuning.drape.step
     step = replace(tuning.walk.step, precision="double", strain_guard=d.strain_guard, vm_passes=d.vm_passes,
                    contact_rounds=d.contact_rounds)
-    lowering = replace(tuning, collide_every=1, walk=replace(tuning.walk, friction=0.0, step=step))
+    lowering = replace(tuning, collide_every=1, walk=replace(tuning.walk, friction=0.0, step=step,
+                                                             tolerance=tuning.cloth.tolerance))
     walk = walk_cloth(lift.rigged, res, request.model_copy(update={"seconds": (len(track.frames) - 1) / FPS,
                                                                    "fps": FPS, "reuse_maps": False,
                                                                    "walk_stiffness": 1.0}),

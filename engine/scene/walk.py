@@ -205,7 +205,8 @@ def walk_cloth(body: Body, drape: DrapeResult, request: TryOnOptions = TryOnOpti
         "flexion_every": step.flexion_every,  # steps between the flexion (and held shear) springs' forces
         "contact_rounds": step.contact_rounds,
         "push_time_ms": step.push_time * 1000,
-        "band_mm": model.params.tolerance * 1000,  # the collision band the cloth kept while walking
+        # the collision band the cloth kept while walking: the solver's and the moving body's
+        "band_mm": {"cloth": model.params.tolerance * 1000, "body": collider.tol * 1000},
         "strain_guard": step.strain_guard,
         "velocity_mode": step.velocity_mode,
         "realtime_factor": sim_seconds / max(wall_walk, 1e-9),
