@@ -1126,9 +1126,9 @@ def test_the_late_guard_finds_and_makes_what_guard_positions_does(garment, shear
     unevenly, some points touching a body -- and then the listed springs whose ends moved are
     measured again (one no longer long is left alone: excess -1e30; so may be, in double, one
     whose end the guard looked at and did not move); the flag and point buffers are clear
-    afterwards. (sheared False: every spring measured from its rest length, bias None -- the
-    diagonals near their limit too, so that some listed springs end short of it.)"""
-    m = _model(garment) if sheared else replace(_model(garment), bias=None)
+    afterwards. (sheared: a cotton shearing to 30 degrees, its diagonals far from their limit;
+    else every spring measured from its rest length, so that some listed springs end short of it.)"""
+    m = _sheared_cotton(garment) if sheared else _model(garment)
     x0, v0, contact, normal = _stretched(garment, [1.05, 1.0, 1.0], 0.0005)
     solver = ClothSolver(m, config=StepConfig(strain_guard=0.02, precision="single", hold_shear=True,
                                               late_guard=True))
@@ -1394,13 +1394,27 @@ def _sheared(garment, degrees: float) -> np.ndarray:
     return np.stack([u + v * math.sin(g), 1.0 + v * math.cos(g), np.zeros_like(u)], axis=1)
 
 
-def test_cotton_shears_freely_up_to_its_locking_angle(model, garment):
+def _sheared_cotton(garment):
+    """A cotton that shears freely up to 30 degrees (Fabric.shear_lock; the presets hold 0)."""
+    g = garment
+    fab = replace(get_fabric("cotton"), shear_lock=30.0)
+    return build_model(g.uv, g.panel, g.lattice, g.quads, g.tris, g.seams, fab, H)
+
+
+def test_the_presets_hold_the_diagonals_at_the_stretch_threshold(model):
+    """Every preset fabric (shear_lock 0) measures every spring from its rest length."""
+    assert all(f.shear_lock == 0.0 for f in FABRICS.values())
+    assert np.array_equal(model.limit_rest, model.rest)
+
+
+def test_cotton_shears_freely_up_to_its_locking_angle(garment):
     """A woven fabric takes a curved shape by shearing (its yarns turn about their crossings)
     until the weave locks (Fabric.shear_lock, 30 degrees for cotton): sheared 20 degrees, no yarn
     is longer and the strain limit leaves the quads' diagonals alone, though they are 16 % long;
     sheared 50 degrees, they read as strained and the limit brings them back to their longest
     (the yarns at the threshold, the weave locked). A border triangle's slanted edge has no yarn
     beside it: it keeps the plain limit (bias 0)."""
+    model = _sheared_cotton(garment)
     s, rest = model.springs, model.rest
     d = garment.uv[s[:, 1]] - garment.uv[s[:, 0]]
     yarn = (model.kind != FLEXION) & (np.abs(d).min(axis=1) < 1e-9)
@@ -1433,9 +1447,7 @@ def test_cotton_shears_freely_up_to_its_locking_angle(model, garment):
 def test_the_shear_limit_survives_welding_and_restiffening(garment):
     """ClothModel.bias (which springs may shear) is carried through weld_model and with_stiffness;
     without it every spring would fall back to the plain limit, silently."""
-    from engine.cloth.model import weld_model
-
-    m = _model(garment)
+    m = _sheared_cotton(garment)
     vmap = np.arange(m.n)
     vmap[1] = 0  # weld one pair of neighbours on the border
     vmap[vmap > 1] -= 1

@@ -160,15 +160,13 @@ def test_flat_panels_whose_seams_stop_closing_are_sewn_again_gently():
                   Tuning(sew=SewTuning(vmax=0.05, far_retry_vmax=0.06, budget=0.3)), place=place, source=name)
 
 
-def test_a_stalled_flat_layout_is_sewn_again_within_a_second():
+def test_a_stalled_flat_layout_is_sewn_again_within_half_a_second():
     """GarmentCode's T-shirt on its own body sews in one pull now that a flat layout's pairs close
     together (SewTuning.far_together), and so it does when the pairs whose path runs through the
     arm meet beside it (SewTuning.meet_outside). Without either, each pulled at 3 m/s as before, its sleeve seams stall ~9 cm
     open from ~0.15 s on: with a second pull to come, the stall is judged over
-    SewTuning.retry_stall windows, so it is sewn again after 0.5-1 s of sewing (0.5 s at the
-    earliest; later while the gap still shrinks a millimetre a window now and then), not after
-    snap_after's 2 s (progress reports come every 5 ms of simulated time while sewing), and then
-    sews and drapes."""
+    SewTuning.retry_stall windows, so it is sewn again after ~0.5 s of sewing, not after 1 s
+    (progress reports come every 5 ms of simulated time while sewing), and then sews and drapes."""
     from engine.body import resolve_body
     from engine.scene.garments import resolve_garment
     from engine.scene.tryon import run_tryon
@@ -188,7 +186,7 @@ def test_a_stalled_flat_layout_is_sewn_again_within_a_second():
         else:
             assert len(again) == 1
             first = sum(1 for stage, m in said[:again[0]] if stage == "sewing" and m.startswith("largest open seam gap"))
-            assert 0.45 <= first * 0.005 <= 1.0, first
+            assert 0.45 <= first * 0.005 <= 0.6, first
         assert rep["seam_gap_mm"]["snapped"] == 0 and rep["settled"] and rep["strain"]["max"] <= 0.06
 
 

@@ -26,7 +26,10 @@ Sources (typical values; real bolts vary by +-30 %):
   30 degrees 22.5 % longer; engine.cloth.model.limit_rest), not from its rest length: 5 % on a
   diagonal is 6 degrees of shear, and a cotton that could shear no more could not wrap an armpit
   or a bust without stretching its yarns. (A border triangle's slanted edge keeps the plain
-  limit: no yarn beside it would hold the yarns' stretch.)
+  limit: no yarn beside it would hold the yarns' stretch.) Every preset holds its diagonals at the
+  stretch threshold for now (shear_lock 0): at 30 degrees for cotton the catalogue's drapes took
+  1.7x the iterations and default:male's trousers in L slid 11 cm down the hips (docs/tuning.md,
+  `Fabric.shear_lock`), against 2 more of 100 GarmentCode designs.
 - Elastane (spandex, Lycra) knits, `stretch_knit`: leggings, swimwear, activewear. Elastane raises
   a single jersey's area density by 23-63 % over the same jersey without it (Akter et al.,
   "Performance analysis of spandex incorporated single jersey fabrics for sportswear", Indian J.
@@ -67,7 +70,9 @@ class Fabric:
     bending: float  # N.m, bending rigidity per unit width
     friction: float  # cloth-skin Coulomb friction coefficient (dimensionless)
     strain_threshold: float  # velocity modification threshold (fraction, seed 003 §4.3)
-    shear_lock: float = 30.0  # degrees: the in-plane shear at which the weave jams (see the module doc)
+    # degrees: the in-plane shear the strain limit lets a quad's diagonals take (see the module doc;
+    # 0: none -- the diagonals held at the stretch threshold, as every preset is for now)
+    shear_lock: float = 0.0
     note: str = ""
 
 
@@ -75,15 +80,15 @@ FABRICS: dict[str, Fabric] = {
     f.name: f
     for f in (
         Fabric("cotton", density=0.120, stretch=490 / 0.045, shear=0.9 * G_UNIT, bending=0.10 * GF_CM2_PER_CM,
-               friction=0.40, strain_threshold=0.05, shear_lock=30.0, note="cotton shirting/poplin, 120 g/m^2"),
+               friction=0.40, strain_threshold=0.05, note="cotton shirting/poplin, 120 g/m^2"),
         Fabric("denim", density=0.420, stretch=490 / 0.035, shear=2.5 * G_UNIT, bending=1.0 * GF_CM2_PER_CM,
-               friction=0.50, strain_threshold=0.03, shear_lock=25.0, note="12.5 oz/yd^2 denim, 420 g/m^2"),
+               friction=0.50, strain_threshold=0.03, note="12.5 oz/yd^2 denim, 420 g/m^2"),
         Fabric("silk", density=0.075, stretch=490 / 0.05, shear=0.4 * G_UNIT, bending=0.025 * GF_CM2_PER_CM,
-               friction=0.25, strain_threshold=0.05, shear_lock=35.0, note="17.5 momme silk charmeuse, 75 g/m^2"),
+               friction=0.25, strain_threshold=0.05, note="17.5 momme silk charmeuse, 75 g/m^2"),
         Fabric("jersey", density=0.180, stretch=490 / 0.35, shear=0.3 * G_UNIT, bending=0.04 * GF_CM2_PER_CM,
-               friction=0.50, strain_threshold=0.15, shear_lock=40.0, note="cotton single jersey knit, 180 g/m^2"),
+               friction=0.50, strain_threshold=0.15, note="cotton single jersey knit, 180 g/m^2"),
         Fabric("stretch_knit", density=0.230, stretch=490 / 0.80, shear=0.2 * G_UNIT, bending=0.03 * GF_CM2_PER_CM,
-               friction=0.50, strain_threshold=0.40, shear_lock=45.0, note="cotton or nylon/elastane jersey (leggings), 230 g/m^2"),
+               friction=0.50, strain_threshold=0.40, note="cotton or nylon/elastane jersey (leggings), 230 g/m^2"),
     )
 }
 
