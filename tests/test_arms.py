@@ -86,6 +86,7 @@ def test_a_coarse_shirt_is_dressed_with_the_arms_raised_and_lowered(arms30, lift
     loaded."""
     from engine.scene.garments import resolve_garment
     from engine.scene.tryon import run_tryon
+    from engine.scene.tuning import Tuning
 
     spec, place, name = resolve_garment("shirt", lift.raised, "M")
     shown = []
@@ -104,6 +105,9 @@ def test_a_coarse_shirt_is_dressed_with_the_arms_raised_and_lowered(arms30, lift
     assert rep["iterations_by_stage"]["lowering_arms"] > 0 and rep["iterations_by_stage"]["settling"] > 0
     assert rep["wall_seconds"]["lowering_arms"] > 0 and rep["wall_seconds"]["settling"] > 0
     assert rep["arms_lowered"]["frames"] == 45 and rep["body"] == arms30.name
+    # part of dressing: the drape's collision band, not the walk's wider one
+    band = 1000 * Tuning().cloth.tolerance
+    assert rep["arms_lowered"]["band_mm"] == {"cloth": pytest.approx(band), "body": pytest.approx(band)}
     assert rep["penetration_mm"]["max"] <= 3.0 and rep["penetration_mm"]["p99"] <= 1.0, rep["penetration_mm"]
     # The cloth between the lowered arm and the torso's back (2.4 cm apart) ends wedged, and how
     # much depends chaotically on the run: measured at 2.8-3.2 cm cloth edges (seven runs each),

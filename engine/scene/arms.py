@@ -176,7 +176,7 @@ def lower_arms(lift: ArmLift, res: DrapeResult, request: TryOnOptions, tuning: T
                   collide_every={**res.collide_every, "lowering_arms": w["collision_every_steps"],
                                  "settling": settled.collide_every["draping"]},
                   lowering={"strain_max": float(w["strain_max"]), "penetration_mm": w["penetration_mm"],
-                            "frames": int(w["frames"])})
+                            "frames": int(w["frames"]), "band_mm": w["band_mm"]})
     return out
 
 
