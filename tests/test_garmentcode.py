@@ -305,3 +305,19 @@ def test_a_fresh_seeded_sample_drapes(tmp_path):
     ok = [r["design"] for r in rows if r["ok"]]
     print(f"{len(ok)} of {len(rows)} drape:", ok, file=sys.stderr)
     assert len(rows) >= 16 and len(ok) >= 5, [(r["design"], r.get("reason")) for r in rows]
+
+
+def test_the_benchmark_groups_stalls_beside_a_part_too_small_apart():
+    """A seam that stalled beside a panel stretched far past the fabric (a cuff cut smaller round
+    than the arm) is the pattern's size, not the sewing: the benchmark's table counts it apart."""
+    bench = _bench()
+    cuff = ("mean_female_13_003_specification.json: error: sewing stopped closing after 2.0 s of simulated time "
+            "(the widest gap stayed 2.4-3.5 cm for 0.5 s) (sewn twice, pulled at 3 and 1.5 m/s); open seams: "
+            "sl_left_cuff_f[2]-sl_left_cuff_b[1] (3.2 cm). Beside them the cloth is stretched far past what cotton "
+            "allows (5 %) over a tenth of a panel or more: 'sl_left_cuff_f' 49 %: that part is too small for this "
+            "body (try a larger size)")
+    hood = ("mean_female_11_001_specification.json: error: sewing stopped closing after 2.0 s of simulated time "
+            "(the widest gap stayed 2.3-2.8 cm for 0.5 s); open seams: left_ftorso[6]-left_hood[3] (2.5 cm). The "
+            "garment may be too small for this body (try a larger size) or the panels start too far apart")
+    assert bench.reason(cuff) == "sewing stopped closing after # s of simulated time, beside a part too small for the body"
+    assert bench.reason(hood) == "sewing stopped closing after # s of simulated time"
