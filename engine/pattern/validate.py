@@ -116,7 +116,8 @@ def _check_panel(name: str, panel, scale: float, rel: bool) -> list[Problem]:
         i, j, n = crossing
         if n > MAX_CROSSINGS:
             out.append(Problem("error", name, i, f"outline crosses itself between {n} pairs of edges (edge {i} "
-                                                 f"crosses edge {j}): check the order of its vertices and edges"))
+                                                 f"crosses edge {j}): check the order of its vertices and edges, "
+                                                 "and whether a dart or a cut reaches past the panel's other side"))
         else:
             out.append(Problem("warning", name, i, f"outline crosses itself (edge {i} crosses edge {j}): meshed "
                                                    "as GarmentCode draws it, its parts joined where the edges cross"))
