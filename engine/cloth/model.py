@@ -373,6 +373,14 @@ def _assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, 
                       seams=seams, fabric=fabric, params=params, dt_bound=dt_bound, edge_length=h)
 
 
+def spring_strains(model: ClothModel, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((L, 2) springs, (L,) strains) of the strain-limited (structural and shear) springs at
+    positions x, measured as the strain limit measures them (from limit_rest)."""
+    limited = model.kind != FLEXION
+    s = model.springs[limited]
+    return s, np.linalg.norm(x[s[:, 1]] - x[s[:, 0]], axis=1) / model.limit_rest[limited] - 1.0
+
+
 def _biased(model: ClothModel, bias: np.ndarray | None) -> ClothModel:
     """The model with its springs' bias (ClothModel.bias), set before limit_rest is first read."""
     model.bias = bias

@@ -30,7 +30,7 @@ import numpy as np
 
 from engine.cloth.config import Attachment, Control, Sewing, StepConfig
 from engine.cloth.fabrics import get_fabric
-from engine.cloth.model import FLEXION, ClothModel, ClothState, build_model, weld_model
+from engine.cloth.model import ClothModel, ClothState, build_model, spring_strains, weld_model
 from engine.cloth.solver import ClothSolver, FireRelaxer
 from engine.cloth.welds import hold_welds, merge_map, seam_gaps
 from engine.collide.base import Collider
@@ -432,8 +432,7 @@ def _too_small_panels(job: _Dressing, model: ClothModel, state: ClothState, weld
     stall: a cuff or band smaller round than the limb it is to close round, named; else None."""
     g = job.garment
     limit = get_fabric(job.request.fabric).strain_threshold + job.tuning.drape.too_tight
-    s = model.springs[model.kind != FLEXION]
-    strain = np.linalg.norm(state.x[s[:, 1]] - state.x[s[:, 0]], axis=1) / model.limit_rest[model.kind != FLEXION] - 1.0
+    s, strain = spring_strains(model, state.x)
     found = []
     for p in np.unique(g.panel[g.seams[~welded].ravel()]):
         on = (g.panel[s[:, 0]] == p) & (g.panel[s[:, 1]] == p)
@@ -569,11 +568,9 @@ def _edge(g: Garment) -> float:
 
 def most_stretched(x: np.ndarray, model: ClothModel) -> tuple[float, np.ndarray]:
     """(strain, midpoint (3,)) of the most stretched structural or shear spring."""
-    s = model.springs[model.kind != FLEXION]
-    r = model.limit_rest[model.kind != FLEXION]
-    a, b = x[s[:, 0]], x[s[:, 1]]
-    k = int(np.argmax(np.linalg.norm(b - a, axis=1) / r))
-    return float(np.linalg.norm(b[k] - a[k]) / r[k] - 1.0), 0.5 * (a[k] + b[k])
+    s, strain = spring_strains(model, x)
+    k = int(np.argmax(strain))
+    return float(strain[k]), 0.5 * (x[s[k, 0]] + x[s[k, 1]])
 
 
 def _too_small(state: ClothState, model: ClothModel, strain: float, fabric, how: str) -> SimulationError:

@@ -41,7 +41,7 @@ import numpy as np
 from engine.body.motion import BodyTrack, walk_track
 from engine.body.types import SEGMENTS, Body
 from engine.cloth.config import Control
-from engine.cloth.model import ClothState, with_stiffness
+from engine.cloth.model import ClothState, spring_strains, with_stiffness
 from engine.cloth.solver import ClothSolver
 from engine.errors import SimulationError
 from engine.scene.drape import DrapeResult, Progress
@@ -273,10 +273,9 @@ def _walk_collider(body: Body, drape: DrapeResult, track: BodyTrack, request: Tr
 
 def spread_strain(model, x: np.ndarray, n: int) -> float:
     """The strain of the n-th most stretched of the model's strain-limited springs at positions x."""
-    s = model.springs[model.strain_limited]
-    if len(s) == 0:
+    _, strain = spring_strains(model, x)
+    if len(strain) == 0:
         return 0.0
-    strain = np.linalg.norm(x[s[:, 1]] - x[s[:, 0]], axis=1) / model.limit_rest[model.strain_limited] - 1.0
     n = min(n, len(strain))
     return float(np.partition(strain, len(strain) - n)[len(strain) - n])
 
