@@ -1,8 +1,8 @@
-"""Patterns that GarmentCode's own generator writes (issue 47), as it writes them: ten designs
+"""Patterns that GarmentCode's own generator writes (issue 47), as it writes them: eleven designs
 drawn by ../shared/garmentcode/sample_designs.py (--body mean_female --seed 1, and two of --seed 11; kept in
 tests/garmentcode/designs/, MIT, see its README) covering a waistband, a fitted dress, pants with cuffs, a
-gathered skirt, a collar with skirt levels, a hood, a top on narrow straps, and sleeves with a
-twelve-gore skirt, a strapless top and a sleeveless dress cut with no ease. The default suite reads, checks and meshes them all and drapes five; the slow suite draws a fresh
+gathered skirt, a collar with skirt levels, a hood, a wide skirt laid out over the hands, a top on narrow straps, and sleeves with a
+fifteen-gore skirt, a strapless top and a sleeveless dress cut with no ease. The default suite reads, checks and meshes them all and drapes five; the slow suite draws a fresh
 seeded sample and drapes it (scripts/bench_garmentcode.py's bars)."""
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ def test_the_handful_covers_what_it_says():
     names = set().union(*(_panels(p) for p in FILES))
     for part in ("wb_front", "pant_l_cuff_f", "hood", "collar_front", "ins_skirt_front", "sleeve_f", "skirt_panel"):
         assert any(n.startswith(part) or part in n for n in names), part
-    assert len(FILES) == 10
+    assert len(FILES) == 11
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name[:17])

@@ -189,6 +189,12 @@ class ClothSolver:
             self.timing["cloth"] += time.perf_counter() - t0
         self.guard_pending = False
 
+    def set_collider(self, collider: Collider) -> None:
+        """Go on against `collider` (the same body seen whole, after some cloth passed through parts
+        of it): the answers carried from the old one are dropped."""
+        self.collider = collider
+        self.answers = CarriedAnswers(collider, self.config, len(self.buf.points), self.model.params.tolerance)
+
     def restiffen(self, model: ClothModel, dt: float) -> None:
         """Go on with `model` -- the same cloth with other spring stiffness
         (engine.cloth.model.with_stiffness) -- at step dt, keeping contacts, carried answers and

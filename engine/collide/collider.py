@@ -4,12 +4,13 @@ velocity, depth past the band's outer edge) answered from image-space collision 
 from __future__ import annotations
 
 from collections import namedtuple
+from dataclasses import dataclass
 
 import numpy as np
 
 from engine.collide.base import Collider
 from engine.collide.maps import CollisionMaps
-from engine.collide.query import query_batch_serial, query_point_into, query_rows_serial
+from engine.collide.query import query_batch_serial, query_point_into, query_points, query_rows_serial
 from engine.collide.server import (HELP_WAIT, SpinServer, StallWatch, after_help, chunk_done, claim, helper_default,
                                    register_job)
 from engine.jit import serial_kernel
@@ -137,3 +138,86 @@ class MapCollider(Collider):
             self.server.close()
             self.server = None
             self._served = None
+
+
+def face_point_mask(vertex_mask: np.ndarray, quads: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """(N + Q + T,) bool: the cloth solver's checked points (vertices, quad midpoints, triangle
+    centroids) of which every vertex is in vertex_mask."""
+    vm = np.asarray(vertex_mask, bool)
+    return np.concatenate([vm, vm[quads].all(axis=1) if len(quads) else np.zeros(0, bool),
+                           vm[tris].all(axis=1) if len(tris) else np.zeros(0, bool)])
+
+
+class ExemptCollider(Collider):
+    """A MapCollider whose points in `exempt` (one flag per checked point, face_point_mask) are
+    answered from other maps, `without` (the body less some parts: the hanging arms, which a
+    lower garment's cloth passes through while it is sewn, engine.body.hanging). The answers are
+    the full collider's buffers, so the solver's carried answers work as with it alone."""
+
+    depth_along_z = True
+    answers_rows = True
+
+    def __init__(self, full: MapCollider, without: CollisionMaps, exempt: np.ndarray):
+        self.full, self.without = full, without
+        self.exempt = np.ascontiguousarray(exempt, dtype=np.bool_)
+        self._rows_full = np.zeros(0, np.int64)  # (kept: the full collider's helper keys its job on the array)
+        self._rows_ex = np.zeros(0, np.int64)
+
+    @property
+    def version(self) -> int:
+        return self.full.version
+
+    def _answer_exempt(self, points: np.ndarray, rows: np.ndarray, n: int):
+        f = self.full
+        query_rows_serial(points, rows, n, f.tol, *self.without.kernel_args(), f.status, f.surface, f.depth,
+                          f.normal, f.velocity, f.map_index)
+        return f.status, f.normal, f.velocity, f.depth
+
+    def query(self, points: np.ndarray):
+        if points.shape[0] != len(self.exempt):
+            raise ValueError(f"ExemptCollider: {points.shape[0]} points, {len(self.exempt)} flags")
+        self.full.query(points)
+        rows = np.flatnonzero(self.exempt)
+        return self._answer_exempt(points, rows, len(rows))
+
+    def query_rows(self, points: np.ndarray, rows: np.ndarray, n_rows: int):
+        if points.shape[0] != self.full._n:
+            return self.query(points)
+        if len(self._rows_full) != len(rows):
+            self._rows_full, self._rows_ex = np.zeros_like(rows), np.zeros_like(rows)
+        asked = rows[:n_rows]
+        ex = self.exempt[asked]
+        n_ex = int(ex.sum())
+        self._rows_ex[:n_ex] = asked[ex]
+        self._rows_full[:n_rows - n_ex] = asked[~ex]
+        if n_rows - n_ex:
+            self.full.query_rows(points, self._rows_full, n_rows - n_ex)
+        return self._answer_exempt(points, self._rows_ex, n_ex)
+
+    def release(self) -> None:
+        self.full.release()
+
+
+@dataclass
+class PassThrough:
+    """Parts of the body that some of the cloth passes through for a while (engine.scene.tryon:
+    a lower garment's panels and the hanging arms): `without` is the maps of the body less those
+    parts, `vertices` flags the garment's vertices (unsewn) that see only it."""
+
+    without: CollisionMaps
+    vertices: np.ndarray  # (N,) bool
+    why: str = ""
+
+    def collider(self, full: MapCollider, vertices: np.ndarray, quads: np.ndarray, tris: np.ndarray) -> ExemptCollider:
+        """`full` with the flagged `vertices` (of a cloth model's vertices) and their faces' points exempt."""
+        return ExemptCollider(full, self.without, face_point_mask(vertices, quads, tris))
+
+    def caught(self, full: MapCollider, x: np.ndarray, vertices: np.ndarray) -> int:
+        """How many of the flagged `vertices` of the cloth at `x` the left-out parts touch (in
+        contact with the whole body, clear of the body without them)."""
+        idx = np.flatnonzero(vertices)
+        if not len(idx):
+            return 0
+        a = query_points(full.maps, x[idx], full.tol).status
+        b = query_points(self.without, x[idx], full.tol).status
+        return int(((a > 0) & (b == 0)).sum())

@@ -209,13 +209,15 @@ class MapRenderer:
     faces: (F, 3) int; segments: (N,) uint8 labels into SEGMENTS (needed when segment_names
     is given); segment_names: segments to render each into its own map pair, or None for one
     whole-body pair; window: (y_min, y_max) height range or None; tol: collision tolerance (m)
-    that sets the side-layer width.
+    that sets the side-layer width; extent: the vertices whose bounding box the whole-body map
+    covers (default: those of its faces) -- the maps of a body less some parts on the same texel
+    grid as the whole body's answer a point away from those parts exactly as they do.
     """
 
     def __init__(self, faces: np.ndarray, *, segments: np.ndarray | None = None,
                  segment_names: list[str] | None = None, texel: float = 0.005,
                  tol: float = 0.005, window: tuple[float, float] | None = None,
-                 with_velocity: bool = False, own_context: bool = False):
+                 with_velocity: bool = False, own_context: bool = False, extent: np.ndarray | None = None):
         if not texel > 0 or not tol >= 0:
             raise InputError(f"texel ({texel}) must be > 0 and tol ({tol}) >= 0")
         if window is not None and not window[1] > window[0]:
@@ -250,6 +252,8 @@ class MapRenderer:
                 seg_ids.append(sid)
         self.segment_ids = np.array(seg_ids, np.int32)
         self._subset_vertices = [np.unique(f).astype(np.int64) for f in subsets]
+        if extent is not None and segment_names is None:  # (the whole-body map's window: see the doc)
+            self._subset_vertices = [np.asarray(extent, np.int64)]
         self._ranges = []                       # (byte offset, index count) in the index buffer
         off = 0
         for f in subsets:
@@ -609,16 +613,18 @@ def _finish_maps(surf, vel, has_vel, depth, layout, ring, kind, side_src):
 
 def render_body_maps(body: Body, texel: float = 0.005, window: tuple[float, float] | None = None,
                      segments: list[str] | None = None, velocities: np.ndarray | None = None,
-                     tol: float = 0.005, vertices: np.ndarray | None = None) -> CollisionMaps:
+                     tol: float = 0.005, vertices: np.ndarray | None = None,
+                     extent: np.ndarray | None = None) -> CollisionMaps:
     """One-off maps of a body (a renderer made, used once and released).
 
     vertices: (N, 3) positions of this frame (default: the body's rest vertices);
     velocities: (N, 3) m/s or None (no velocity maps); segments: names from SEGMENTS to map
-    each separately, or None for the whole body; window: (y_min, y_max) or None."""
+    each separately, or None for the whole body; window: (y_min, y_max) or None; extent: see
+    MapRenderer."""
     verts = body.vertices if vertices is None else np.asarray(vertices, np.float64)
     normals = Body(verts, body.faces).vertex_normals()
     r = MapRenderer(body.faces, segments=body.segments, segment_names=segments, texel=texel,
-                    tol=tol, window=window, with_velocity=velocities is not None)
+                    tol=tol, window=window, with_velocity=velocities is not None, extent=extent)
     try:
         return r.render(verts, normals, velocities)
     finally:

@@ -24,7 +24,7 @@ import time
 from collections import deque
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -40,6 +40,9 @@ from engine.scene.request import TryOnOptions
 from engine.scene.attach import welded
 from engine.scene.layers import needs_self_contact
 from engine.scene.tuning import Tuning
+
+if TYPE_CHECKING:  # (the map collider's module loads OpenGL: not at import)
+    from engine.collide.collider import PassThrough
 
 FELL_BELOW = -0.05  # m: cloth wholly below this height has fallen off the body (feet stand on y = 0)
 SETTLE_CHECKS = 5  # the settle test runs this many times a window (on the two windows just ended)
@@ -121,6 +124,12 @@ class _Dressing:
     attachment: Attachment | None = None  # labelled edges held while sewing (engine.scene.attach)
     layered: bool = False  # with cloth-cloth contact (engine.scene.layers)
     body: object = None  # the body's MeshBVH (seam pairs meeting beside it, SewTuning.meet_outside), or None
+    pass_through: PassThrough | None = None  # parts of the body some cloth passes through until it hangs
+
+    @property
+    def exempt(self) -> np.ndarray | None:
+        """(N unsewn,) the garment's vertices that pass through parts of the body, or None."""
+        return None if self.pass_through is None else self.pass_through.vertices
 
     @cached_property
     def meet_side(self) -> np.ndarray:
@@ -145,8 +154,13 @@ class _Dressing:
             side += out - (out * t).sum(1)[:, None] * t
         return side
 
-    def solver(self, model: ClothModel) -> ClothSolver:
-        return ClothSolver(model, self.collider, dressing_config(self.request, self.tuning, self.layered),
+    def solver(self, model: ClothModel, exempt: np.ndarray | None = None) -> ClothSolver:
+        """A solver of `model` against the body; exempt: the model's vertices that pass through
+        the parts of the body that pass_through leaves out."""
+        body = self.collider
+        if exempt is not None and self.pass_through is not None:
+            body = self.pass_through.collider(body, exempt, model.quads, model.tris)
+        return ClothSolver(model, body, dressing_config(self.request, self.tuning, self.layered),
                            dt=self.request.dt, force_dt=self.request.force_dt)
 
     def fresh_state(self) -> ClothState:
@@ -168,29 +182,36 @@ class _Sewn:
     every: int  # steps between collision checks
     attachment: Attachment | None  # on the welded cloth
     vertex_map: np.ndarray  # (N unsewn,) -> welded vertex
+    exempt: np.ndarray | None = None  # (N welded,) the vertices that pass through (_Dressing.pass_through)
 
 
 def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOptions = TryOnOptions(),
                   tuning: Tuning = Tuning(), progress: Progress = _noop, observer: Observer | None = None,
-                  attachment: Attachment | None = None, body_bvh=None) -> DrapeResult:
+                  attachment: Attachment | None = None, body_bvh=None,
+                  pass_through: PassThrough | None = None) -> DrapeResult:
     """Sew the placed panels, then drape them, against the same collider (module doc). attachment:
     vertices held on planes while sewing and draping (engine.scene.attach). body_bvh: the body's
-    MeshBVH (engine.collide.bvh), for seam pairs whose path runs through the body (None: not)."""
+    MeshBVH (engine.collide.bvh), for seam pairs whose path runs through the body (None: not).
+    pass_through: cloth that passes through parts of the body while it is sewn and until the drape
+    first settles (then it meets the whole body, and settles again where the parts caught it)."""
     tuning.validate()
     layered = needs_self_contact(garment, tuning)
-    job = _Dressing(garment, collider, request, tuning, progress, observer, attachment, layered[0], body_bvh)
+    job = _Dressing(garment, collider, request, tuning, progress, observer, attachment, layered[0], body_bvh,
+                    pass_through)
     model = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
                         get_fabric(request.fabric), _edge(garment), tuning.cloth)
     state = job.fresh_state()
-    solver = job.solver(model)
+    exempt = pass_through.vertices if pass_through is not None else None
+    solver = job.solver(model, exempt)
     t0 = time.perf_counter()
     sewn = _sew(job, model, state, solver) if len(garment.seams) else None
     t_sew = time.perf_counter() - t0
     if sewn is not None:
-        model, state, solver = sewn.model, sewn.state, sewn.solver
+        model, state, solver, exempt = sewn.model, sewn.state, sewn.solver, sewn.exempt
     res = drape(model, state, collider, request, tuning, progress, observer,
                 gravity_from=sewn.gravity if sewn else 0.0, solver=solver,
-                attachment=sewn.attachment if sewn else attachment)
+                attachment=sewn.attachment if sewn else attachment,
+                release=None if exempt is None else (pass_through, exempt))
     cloth_t = dict(sewn.timing) if sewn else {"cloth": 0.0, "collision": 0.0}
     for k in cloth_t:
         cloth_t[k] += res.timing[f"{k}_total"]
@@ -221,7 +242,7 @@ def _sew(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSolv
             its += solver.iterations
             for k, v in solver.timing.items():
                 timing[k] += v
-            state, solver = job.fresh_state(), job.solver(model)
+            state, solver = job.fresh_state(), job.solver(model, job.exempt)
             job.progress("sewing", 0.0, f"the seams stopped closing: sewing again, pulled at {vmax:g} m/s")
         control = Control(friction_scale=t.friction or 0.0, collide_every=_sew_every(job.tuning, dt, vmax),
                           sewing=Sewing(pairs, np.zeros(len(pairs), dtype=np.bool_), t.tau, vmax,
@@ -248,9 +269,13 @@ def _sew(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSolv
     np.add.at(w, vmap, model.mass)
     model = weld_model(model, vmap, garment.uv if t.seam_flexion else None)
     state = ClothState(x_new / w[:, None], v_new / w[:, None])
-    return _Sewn(model=model, state=state, solver=job.solver(model), iterations=its, timing=timing,
+    exempt = None
+    if job.exempt is not None:  # a welded vertex passes through while all its copies do
+        exempt = np.ones(len(x_new), dtype=bool)
+        np.logical_and.at(exempt, vmap, job.exempt)
+    return _Sewn(model=model, state=state, solver=job.solver(model, exempt), iterations=its, timing=timing,
                  gap_max=pull.gap_max, snapped=pull.snapped, gravity=pull.gravity, every=int(control.collide_every),
-                 attachment=welded(job.attachment, vmap), vertex_map=vmap)
+                 attachment=welded(job.attachment, vmap), vertex_map=vmap, exempt=exempt)
 
 
 @dataclass
@@ -451,12 +476,15 @@ def _too_small_panels(job: _Dressing, model: ClothModel, state: ClothState, weld
 def drape(model: ClothModel, state: ClothState, collider: Collider | None, request: TryOnOptions = TryOnOptions(),
           tuning: Tuning = Tuning(), progress: Progress = _noop, observer: Observer | None = None,
           gravity_from: float = 1.0, solver: ClothSolver | None = None,
-          attachment: Attachment | None = None) -> DrapeResult:
+          attachment: Attachment | None = None, release: tuple | None = None) -> DrapeResult:
     """The drape stage alone (module doc), from `state` (changed in place) of the sewn `model`:
     until the shape stops moving, or the budget ends; a garment left stretched past the fabric's
     threshold + too_tight is refused. Gravity grows from `gravity_from` x g over the rest of the
     ramp. `solver` (of this model and collider) carries its iteration count and timing on.
-    attachment: vertices kept in front of planes (engine.scene.attach). The result's seam fields are zero (no seams are open in a sewn model)."""
+    attachment: vertices kept in front of planes (engine.scene.attach). The result's seam fields are zero (no seams are open in a sewn model).
+    release: (PassThrough, the model's vertices it lets through) while `solver` answers them from the
+    body less some parts: when the drape settles, `collider` (the whole body) takes over; where
+    the left-out parts touch the cloth then, the drape goes on until it settles again."""
     t = tuning.drape
     tuning.validate()
     fabric = get_fabric(request.fabric)
@@ -532,6 +560,15 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
             guard_share = sum(guards) / window
             full = gravity_from + (it + 1 - window) * dt / ramp >= 1.0  # the last window at full g
             if max(older, drift) < t.settle_speed and it >= min_it and full:
+                if release is not None:
+                    caught = release[0].caught(collider, state.x, release[1])
+                    solver.set_collider(collider)
+                    release = None
+                    if caught:  # (the parts left out meet the cloth: it settles again against them)
+                        snaps.clear()
+                        snaps.append(state.x.copy())
+                        min_it = it + 1 + window
+                        continue
                 settled = True
                 break
     strain = solver.max_strain(state)

@@ -207,9 +207,12 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
             watch(stage, x, tri, bv)
     bvh = bvh_job.result()  # (done before the solver and its query helper thread start)
     held, held_note = attachment(garment, body)
+    passing = _arms_passed(body, garment, plan, request, tuning.cloth.tolerance)
+    if passing is not None:
+        map_info["passed_through"] = passing.why
     try:
         res = sew_and_drape(garment, collider, request, tuning, progress, observer=observer, attachment=held,
-                            body_bvh=bvh if lift is None else None)
+                            body_bvh=bvh if lift is None else None, pass_through=passing)
     except SimulationError as e:
         _carried_hint(e, placement_note, body)
         raise
@@ -304,6 +307,75 @@ def _body_collider(body: Body, plan: TryOnPlan, request: TryOnOptions, tolerance
 
     return (ObjectSpaceCollider(body.vertices, body.faces, tolerance=tolerance),
             {"maps": [], "bvh_triangles": int(len(body.faces))})
+
+
+EXEMPT_BELOW = 0.05  # m: a panel this far under the armpits (all of it) is a lower garment's ...
+EXEMPT_AXIS = 0.4  # m: ... all of it that lies this near the body's vertical axis
+
+
+def _arms_passed(body: Body, garment, plan: TryOnPlan, request: TryOnOptions, tolerance: float):
+    """The PassThrough (engine.collide.collider) of a garment with panels that hang wholly below
+    the arms (skirts, trousers, a dress's skirt), or None: their cloth passes through the arms
+    that hang beside them while the seams close and until the drape first settles, as in
+    GarmentCode's own simulator (engine.body.hanging); then it meets the whole body."""
+    if request.collision != "image" or (plan.segments is not None and not any("arm" in s for s in plan.segments)):
+        return None
+    from engine.body.hanging import hanging_arms
+    from engine.body.measure import measure
+
+    try:
+        armpit = float(body.vertices[:, 1].min()) + float(measure(body).armpit_height)
+    except TryonError:
+        return None
+    arm = hanging_arms(body, armpit)
+    if arm is None:
+        return None
+
+    # a lower garment's panels: under the armpits, sewn together into pieces (a skirt's ring, a
+    # trouser leg, a cuff) centred nearer the trunk than an arm (a cuff's ring round the wrist is
+    # an arm's; a wide skirt laid out in a ring reaches the hands, but its middle is the hips).
+    # A panel's height is that of its part near the body's axis (the outer tiers of a wide skirt
+    # rise towards their edges, far beside the body) and of its middle.
+    n = len(garment.panel_names)
+    x = garment.positions
+    near = np.hypot(x[:, 0], x[:, 2]) < EXEMPT_AXIS
+    top = np.full(n, -np.inf)
+    np.maximum.at(top, garment.panel[near], x[near, 1])
+    mid = np.bincount(garment.panel, weights=x[:, 1], minlength=n) / np.maximum(np.bincount(garment.panel, minlength=n), 1)
+    below = (top < armpit - EXEMPT_BELOW) & (mid < armpit - EXEMPT_BELOW)
+    if not below.any():
+        return None
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    pp = garment.panel[garment.seams] if len(garment.seams) else np.zeros((0, 2), int)
+    pp = pp[below[pp].all(axis=1)]
+    _, piece = connected_components(coo_matrix((np.ones(len(pp)), (pp[:, 0], pp[:, 1])), shape=(n, n)),
+                                    directed=False)
+    lower = np.zeros(n, bool)
+    tree = cKDTree(body.vertices)
+    for c in np.unique(piece[below]):
+        panels = np.flatnonzero((piece == c) & below)
+        middle = garment.positions[np.isin(garment.panel, panels)].mean(axis=0)
+        lower[panels] = not arm[tree.query(middle)[1]]
+    if not lower.any():
+        return None
+    from engine.collide.collider import PassThrough
+    from engine.collide.maps import render_body_maps
+
+    if plan.segments is None:
+        keep = ~arm[body.faces].any(axis=1)
+        without = render_body_maps(Body(body.vertices, body.faces[keep]), texel=request.texel, window=plan.window,
+                                   tol=tolerance, extent=np.unique(body.faces))  # (the whole body's grid)
+    else:
+        without = render_body_maps(body, texel=request.texel, window=plan.window, tol=tolerance,
+                                   segments=[s for s in plan.segments if "arm" not in s])
+    names = ", ".join(garment.panel_names[i] for i in np.flatnonzero(lower))
+    return PassThrough(without, lower[garment.panel],
+                       f"{names}: passed through the hanging arms while sewn and until the drape first settled "
+                       "(as in GarmentCode's simulator: a skirt's side seams otherwise catch on the hands), "
+                       "then draped against the whole body")
 
 
 def _slid(body: Body, res: DrapeResult, shift: dict, placement_note: str | None,
