@@ -943,3 +943,32 @@ def test_a_knit_is_guarded_closer_to_its_threshold_than_cotton():
     assert dressing_config(TryOnOptions(fabric="jersey"), Tuning()).strain_guard == pytest.approx(0.003)
     off = replace(Tuning(), drape=replace(DrapeTuning(), soft_guard=None))
     assert dressing_config(TryOnOptions(fabric="jersey"), off).strain_guard == pytest.approx(0.005)
+
+
+def test_a_stall_of_lone_pairs_is_eased_in_up_to_snap_lone_gap():
+    """Sewing stalled with every open pair alone on its stitch (the last pair of a seam where four
+    panels meet, 2.4 cm apart on GarmentCode's hooded dress 1_019): welded where they are up to
+    snap_lone_gap; the same gap over two neighbouring pairs of one stitch (a seam open along a
+    stretch) is given up, as any stall wider than snap_gap."""
+    from collections import deque
+
+    from engine.scene.drape import _lone_open, _Pull, _stalled
+
+    seam_id = np.array([0, 0, 0, 0, 1, 1, 1])
+    welded = np.array([True, True, True, False, True, True, False])  # each stitch's end pair open
+    assert _lone_open(welded, seam_id)
+    assert _lone_open(np.array([False, True, False, True, False, True, True]), seam_id)
+    assert not _lone_open(np.array([True, True, False, False, True, True, True]), seam_id)
+    # (pairs of different stitches side by side in the list are not neighbours)
+    assert _lone_open(np.array([True, True, True, False, False, True, True]), seam_id)
+
+    t = Tuning().sew
+    assert t.snap_gap < 0.025 < t.snap_lone_gap
+
+    def stall(lone):
+        out = _Pull(welded=welded.copy(), gaps=np.zeros(len(welded)))
+        done = _stalled(out, deque([0.025] * 10, maxlen=10), 1000, 1e-3, t, lone)
+        return done, bool(out.welded.all()), out.gave_up is not None
+
+    assert stall(lone=True) == (True, True, False)  # eased in
+    assert stall(lone=False) == (True, False, True)  # given up

@@ -179,3 +179,26 @@ def test_a_wide_skirt_laid_out_to_the_hands_drapes():
     assert row["ok"], row.get("error") or row.get("reason")
     _, rep = run_tryon(body, load_pattern(path))
     assert "skirt_panel_0" in rep["collision_maps"]["passed_through"]
+
+
+@pytest.mark.integration
+def test_cloth_near_the_armpits_meets_the_arms():
+    """A top that ends under the armpits (a tube top, GarmentCode's 13_022) let through the arms
+    was caught inside the upper arm when the arms came back (36 mm deep): panels reaching within
+    EXEMPT_BELOW of the armpits meet the arms (a waistband raised that high), the panels under
+    them pass; and the arm beside the armpit (APART_BELOW) is never let through."""
+    from engine.body import resolve_body
+    from engine.body.hanging import APART_BELOW, hanging_arms
+    from engine.scene.request import TryOnOptions
+    from engine.scene.tryon import EXEMPT_BELOW, _arms_passed, plan_maps
+
+    body = resolve_body(str(SAMPLE_BODY))
+    armpit = _armpit(body)
+    assert (body.vertices[hanging_arms(body, armpit), 1] < armpit - APART_BELOW).all()
+    g = _garment("mean_female_1_012", body)  # a skirt on a waistband 8 cm tall
+    wb = np.isin(g.panel, [g.panel_names.index(n) for n in ("wb_front", "wb_back")])
+    for below, band_passes in ((EXEMPT_BELOW - 0.02, False), (EXEMPT_BELOW + 0.02, True)):
+        g.positions[:, 1] += armpit - below - g.positions[:, 1].max()
+        pt = _arms_passed(body, g, plan_maps(body, g, 0.005, "image"), TryOnOptions(), 0.003)
+        assert pt.vertices[~wb].all()  # the skirt's panels, all of them under the band
+        assert pt.vertices[wb].all() == band_passes and pt.vertices[wb].any() == band_passes, below

@@ -20,11 +20,11 @@ APART_BELOW = 0.10  # passed through an arm held closer would be caught between 
 
 
 def hanging_arms(body: Body, armpit_y: float) -> np.ndarray | None:
-    """(N,) bool: the body's vertices on an arm that hangs apart from the trunk below armpit_y
-    (world height) -- the arms by their segment labels, or where the body has none, the parts of
-    the mesh below the cut that are not joined to the trunk there -- at least APART from the
-    trunk from APART_BELOW down (an A-pose's arms; not arms held against the torso, hands on the hips).
-    None where there is no such arm."""
+    """(N,) bool: the body's vertices on an arm that hangs apart from the trunk, from APART_BELOW
+    under armpit_y (world height) down -- the arms by their segment labels, or where the body has
+    none, the parts of the mesh below the cut that are not joined to the trunk there -- that stay
+    at least APART from the trunk there (an A-pose's arms; not arms held against the torso, hands
+    on the hips). None where there is no such arm."""
     v, f = body.vertices, np.asarray(body.faces)
     if not np.isfinite(armpit_y) or not len(f):
         return None
@@ -46,7 +46,7 @@ def hanging_arms(body: Body, armpit_y: float) -> np.ndarray | None:
     low = v[:, 1] < armpit_y - APART_BELOW
     for p in parts:
         if (p & low).any() and tree.query(v[p & low], distance_upper_bound=APART)[0].min() >= APART:
-            arm |= p
+            arm |= p & low  # (the upper arm beside the armpit stays: a top's side is sewn there)
     return arm if arm.any() else None
 
 

@@ -339,7 +339,8 @@ def _pull(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSol
             # at once crumpled a fitted bodice while its shoulder seams were still 55 cm apart
             control.sewing = sewing = replace(sewing, tau=max(t.tau, g / sewing.vmax))
         stall.append(g)
-        if len(stall) == stall.maxlen and it >= snap_from and _stalled(out, stall, it, dt, t):
+        if len(stall) == stall.maxlen and it >= snap_from and _stalled(out, stall, it, dt, t,
+                                                                       _lone_outside(job, state.x, pairs, welded)):
             break
         job.progress("sewing", min(1.0, 1.0 - g / max(gap0, 1e-9)), f"largest open seam gap {g * 100:.1f} cm")
     seam_gaps(state.x, pairs, out.gaps)
@@ -405,24 +406,42 @@ def _meet_beside(job: _Dressing, x: np.ndarray, sewing: Sewing, gaps: np.ndarray
         sewing.meet_on[k] = True
 
 
-def _stalled(out: _Pull, stall: deque, it: int, dt: float, t) -> bool:
+def _lone_open(welded: np.ndarray, seam_id: np.ndarray) -> bool:
+    """Whether every open pair is alone on its stitch (its neighbours along the stitch are sewn)."""
+    open_ = ~welded
+    same = seam_id[1:] == seam_id[:-1]
+    return not (open_[1:] & open_[:-1] & same).any()
+
+
+def _lone_outside(job: _Dressing, x: np.ndarray, pairs: np.ndarray, welded: np.ndarray) -> bool:
+    """_lone_open, and every open pair's midpoint outside the body (job.body; None: no): a pair
+    eased in across the body would be welded through it."""
+    if job.body is None or not _lone_open(welded, job.garment.seam_id):
+        return False
+    p = pairs[~welded]
+    return bool((job.body.signed_distance(0.5 * (x[p[:, 0]] + x[p[:, 1]]), max_distance=0.1) > 0.0).all())
+
+
+def _stalled(out: _Pull, stall: deque, it: int, dt: float, t, lone: bool = False) -> bool:
     """Whether the seams stopped closing (the widest gap's median shrank < 1 mm from the older half
     of the stall window to the recent one; its median, not its least: a gap swinging 1.7-3 cm
     for seconds has a new least now and then without closing): welded where they are if within
     snap_gap (now and in the median, a swaying pair included), given up (out.gave_up) where the
     median is wider (a gap swinging about snap_gap, neither, had sewn on to the end of the budget:
-    minutes of wall time under cloth-cloth contact)."""
+    minutes of wall time under cloth-cloth contact). lone: every open pair is alone on its stitch
+    (_lone_open): then within snap_lone_gap."""
     h = len(stall) // 2
     older, recent = list(stall)[:h], list(stall)[h:]
     if np.median(older) - np.median(recent) >= 0.001:
         return False
     g = stall[-1]
-    if g <= t.snap_gap and np.median(recent) <= t.snap_gap:
+    snap = max(t.snap_gap, t.snap_lone_gap) if lone else t.snap_gap
+    if g <= snap and np.median(recent) <= snap:
         out.snapped = int((~out.welded).sum())
         out.gap_max = max(out.gap_max, g)
         out.welded[:] = True
         return True
-    if np.median(recent) > t.snap_gap:
+    if np.median(recent) > snap:
         out.gave_up = ((it + 1) * dt, min(recent), max(recent))
         return True
     return False

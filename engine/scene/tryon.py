@@ -309,7 +309,7 @@ def _body_collider(body: Body, plan: TryOnPlan, request: TryOnOptions, tolerance
             {"maps": [], "bvh_triangles": int(len(body.faces))})
 
 
-EXEMPT_BELOW = 0.05  # m: a panel this far under the armpits (all of it) is a lower garment's ...
+EXEMPT_BELOW = 0.10  # m: a panel this far under the armpits (all of it) is a lower garment's ...
 EXEMPT_AXIS = 0.4  # m: ... all of it that lies this near the body's vertical axis
 
 

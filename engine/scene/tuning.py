@@ -34,7 +34,9 @@ class SewTuning:
     budget: float = 4.0  # s of simulated time
     snap_after: float = 2.0  # s: after this, seams that stopped closing ...
     snap_stall: float = 0.5  # ... (the widest gap shrank < 1 mm over this long) ...
-    snap_gap: float = 0.02  # m: ... within this are welded where they are; wider, sewing gives up
+    snap_gap: float = 0.02  # m: ... within this are welded where they are; wider, sewing gives up ...
+    snap_lone_gap: float = 0.03  # m: ... or within this, where every open pair is alone on its stitch
+    # (its neighbours sewn: the last pair of a seam at a junction of panels, eased in as a sewist would)
     seam_flexion: bool = True  # bending springs across the sewn seams
     meet_outside: bool = True  # a flat layout's pair whose path runs through the body meets beside it (pull_seams)
     meet_margin: float = 0.01  # m: ... this far outside the body's surface nearest its midpoint
