@@ -202,3 +202,18 @@ def test_cloth_near_the_armpits_meets_the_arms():
         pt = _arms_passed(body, g, plan_maps(body, g, 0.005, "image"), TryOnOptions(), 0.003)
         assert pt.vertices[~wb].all()  # the skirt's panels, all of them under the band
         assert pt.vertices[wb].all() == band_passes and pt.vertices[wb].any() == band_passes, below
+
+
+@pytest.mark.integration
+def test_the_catalogue_s_placement_does_not_pass_through():
+    """The catalogue places its garments clear of the arms itself: its skirt on the default body
+    (whose arms hang 13 cm from the trunk) meets the whole body all along, as before."""
+    from engine.body import resolve_body
+    from engine.scene.garments import resolve_garment
+    from engine.scene.tryon import run_tryon
+
+    body = resolve_body("default:female")
+    spec, place, name = resolve_garment("skirt", body, "M")
+    _, rep = run_tryon(body, spec, place=place, source=name)
+    assert "passed_through" not in rep["collision_maps"]
+    assert rep["settled"]

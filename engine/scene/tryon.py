@@ -207,7 +207,9 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
             watch(stage, x, tri, bv)
     bvh = bvh_job.result()  # (done before the solver and its query helper thread start)
     held, held_note = attachment(garment, body)
-    passing = _arms_passed(body, garment, plan, request, tuning.cloth.tolerance)
+    # (a pattern file's own layout: GarmentCode's reaches its body's hands; the catalogue's and a
+    # DXF's placements start clear of the arms)
+    passing = _arms_passed(body, garment, plan, request, tuning.cloth.tolerance) if pattern_file else None
     if passing is not None:
         map_info["passed_through"] = passing.why
     try:
