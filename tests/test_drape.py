@@ -931,6 +931,21 @@ def test_a_ring_tier_laid_out_tall_hangs_its_width_and_is_not_bunched_up():
     heaped = hung.copy()
     heaped[:n, 1] = 1.0 - 0.3 * (rr - 0.78)
     assert shortest_panel(garment, SimpleNamespace(positions=heaped, vertex_map=vmap))[0] < BUNCHED
+    # a stub of a seam at its end (2.4 cm, GarmentCode's high-low tiers have 3.5 cm sides), level and
+    # higher than the seam it hangs from, is not what it hangs from (it hung 5 cm and was called
+    # bunched: 32 cm tall of a 179 cm length)
+    side = np.array([[0.78, -0.01], [0.804, -0.01]])
+    garment.uv = np.concatenate([garment.uv, side])
+    garment.positions = np.concatenate([placed, np.column_stack([side, np.zeros(2)])])
+    garment.panel = np.concatenate([garment.panel, [2, 2]])
+    garment.panel_names = ["tier", "above", "side"]
+    garment.seams = np.concatenate([garment.seams, [[0, n + m], [1, n + m + 1]]])
+    garment.seam_id = np.concatenate([garment.seam_id, [1, 1]])
+    stub = np.concatenate([hung, [[0.2, 1.05, 0.0], [0.21, 1.05, 0.0]]])
+    stub[[0, 1], 1] = 1.05
+    vmap = np.arange(len(stub))
+    ratio, name, _, length = shortest_panel(garment, SimpleNamespace(positions=stub, vertex_map=vmap))
+    assert length == pytest.approx(0.17, abs=0.01) and ratio > 0.9, (name, length, ratio)
 
 
 def test_a_knit_is_guarded_closer_to_its_threshold_than_cotton():

@@ -476,6 +476,7 @@ HEM_RISE = 0.15  # m: ... whose lowest point ends this far above its placed heig
 PANEL_TALL = 0.15  # m: ... where a panel placed at least this tall ...
 BUNCHED = 0.6  # ... hangs shorter than this share of the length it can hang (hang_warnings) ...
 HUNG_FROM = 0.03  # m: ... reaching from its highest seam (sewn to none: its vertices this near its top)
+ACROSS_SHARE = 0.25  # ... of those across it at least this share of the longest as long
 TIGHT = 0.01  # a drape stretched past the fabric's threshold by more than this is reported tight
 # (issue 3's quality limit; the strain guard holds a garment that fits at threshold + 0.5 %, a knit 0.3 %)
 CLOSE_FIT_FABRIC = "jersey"  # a pattern file too tight for the default fabric is draped again in this knit
@@ -551,12 +552,17 @@ def shortest_panel(garment: Garment, res: DrapeResult) -> tuple[float, str, floa
         if placed < PANEL_TALL:
             continue
         draped = float(np.ptp(y1[on]))
-        across = []  # its seams across it (not side seams running down): (mean draped height, vertices)
+        across = []  # its seams across it (not side seams running down): (mean draped height, vertices, length)
         mine = on[seams]
         for s in np.unique(sid[mine.any(1)]):
             v = seams[sid == s][mine[sid == s]]
-            if len(v) >= 2 and np.ptp(y1[v]) <= 0.5 * np.linalg.norm(np.diff(garment.uv[v], axis=0), axis=1).sum():
-                across.append((float(y1[v].mean()), v))
+            n = np.linalg.norm(np.diff(garment.uv[v], axis=0), axis=1).sum() if len(v) >= 2 else 0.0
+            if len(v) >= 2 and np.ptp(y1[v]) <= 0.5 * n:
+                across.append((float(y1[v].mean()), v, n))
+        # (not a stub of a seam: a ruffle tier 5 cm wide sewn 5.5 m round to the tier above has
+        # side seams 3.5 cm long that lie level, higher than the gathered top it hangs from)
+        longest = max((n for _, _, n in across), default=0.0)
+        across = [(h, v) for h, v, n in across if n >= ACROSS_SHARE * longest]
         top = max((h for h, _ in across), default=None)
         hung = np.concatenate([v for h, v in across if h >= top - HUNG_FROM]) if across else None
         if hung is None:
