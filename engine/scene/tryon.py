@@ -231,6 +231,8 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     shrunk = shortest_panel(garment, res)
     if slid(shift, SLID_OFF):  # settled, but not on the body: never written as a result
         raise _slid(body, res, shift, placement_note, crossing_hint(garment))
+    if not pattern_file and rode_up(shift, res.strain_max, fab):  # (a pattern file's layout may rise into place)
+        raise _rode_up(res, shift, fab)
     pen = penetration_stats(body.vertices, body.faces, res.positions, bvh=bvh)
     iters = sum(res.iterations.values())
     tc, tk = res.timing["cloth_total"], res.timing["collision_total"]
@@ -394,6 +396,26 @@ def _slid(body: Body, res: DrapeResult, shift: dict, placement_note: str | None,
     return err
 
 
+def rode_up(shift: dict, strain: float, fabric) -> bool:
+    """Whether a garment placed where it is worn rode up: its bulk rose RODE_UP and it ended tight
+    (stretched past the fabric's threshold + TIGHT)."""
+    return shift.get("bulk", shift["top"]) > RODE_UP and strain > fabric.strain_threshold + TIGHT
+
+
+def _rode_up(res: DrapeResult, shift: dict, fab) -> SimulationError:
+    """A garment the catalogue placed where it is worn that rose RODE_UP and ended tight: too small
+    round the body there, it was pushed up to where the body is narrower (an XS shirt over a
+    97.5 cm bust rose 9 cm and ended 6 % stretched, where it would be 19 % round the bust)."""
+    err = SimulationError(
+        f"the garment is too small for this body: it rode {100 * shift['bulk']:.0f} cm up from where it is worn "
+        f"and is stretched {100 * res.strain_max:.0f} % where {fab.name} allows "
+        f"{100 * fab.strain_threshold:.0f} % there; try a larger size")
+    err.positions, err.triangles = res.positions.copy(), res.triangles  # for a picture
+    err.too_small = True  # (engine.scene.garments: --size auto tries a larger one)
+    err.strain = res.strain_max
+    return err
+
+
 def _carried_hint(err: Exception, placement_note: str | None, body: Body, slid: bool = False) -> None:
     """A GarmentCode pattern carried onto another body by its landmarks (pattern_placement) whose
     seams did not close, or that slid down the body: on a body whose girths differ from the mean
@@ -472,6 +494,7 @@ def sewing_friction(body: Body, fabric=None) -> tuple[float, str | None]:
 TOP_DROP = 0.10  # m: a garment whose top ends this far below where it was placed slid down the body
 # m: ... and this far, it came off it: an error, not a result (it may meet every other bar)
 SLID_OFF = 0.25
+RODE_UP = 0.06  # m: a catalogue garment whose bulk rose this far and ended tight is too small (_rode_up)
 HEM_RISE = 0.15  # m: ... whose lowest point ends this far above its placed height bunched up ...
 PANEL_TALL = 0.15  # m: ... where a panel placed at least this tall ...
 BUNCHED = 0.6  # ... hangs shorter than this share of the length it can hang (hang_warnings) ...
