@@ -217,3 +217,54 @@ def test_the_catalogue_s_placement_does_not_pass_through():
     _, rep = run_tryon(body, spec, place=place, source=name)
     assert "passed_through" not in rep["collision_maps"]
     assert rep["settled"]
+
+
+@pytest.mark.integration
+def test_a_drape_that_never_settled_says_the_arms_may_pass_through():
+    """The whole body takes over at the drape's first settle; a drape that ends unsettled (here a
+    budget of 0.1 s) meets it only from then on, and the report says the arms may pass through."""
+    from dataclasses import replace
+
+    from engine.body import resolve_body
+    from engine.pattern.io import load_pattern
+    from engine.scene.tryon import run_tryon
+    from engine.scene.tuning import Tuning
+
+    t = Tuning()
+    t = replace(t, drape=replace(t.drape, budget=0.1))
+    res, rep = run_tryon(resolve_body(str(SAMPLE_BODY)), load_pattern(DESIGNS / "mean_female_1_018_specification.json"),
+                         tuning=t)
+    assert res.released is False and not rep["settled"]
+    assert "the whole body never took over" in rep["collision_maps"]["passed_through"]
+
+
+@pytest.mark.integration
+def test_a_body_with_segments_keeps_the_arm_above_its_hanging_part():
+    """On a body with segment labels (the default body) the maps without the arms leave out only the
+    hanging parts: a point in the upper arm beside the armpit is still inside, one in the forearm
+    is not."""
+    from engine.body import resolve_body
+    from engine.body.hanging import APART_BELOW, hanging_arms
+    from engine.collide.query import query_points
+    from engine.scene.request import TryOnOptions
+    from engine.scene.tryon import _arms_passed, plan_maps
+
+    body = resolve_body("default:female")
+    assert body.segments is not None
+    g = _garment("mean_female_1_018", body)
+    plan = plan_maps(body, g, 0.005, "image")
+    assert plan.segments is not None and "left_arm" in plan.segments
+    pt = _arms_passed(body, g, plan, TryOnOptions(), 0.003)
+    armpit = _armpit(body)
+    arm = hanging_arms(body, armpit)
+    from engine.body.types import SEGMENTS
+
+    left = np.flatnonzero(body.segments == SEGMENTS.index("left_arm"))
+    y = body.vertices[left, 1]
+    n = body.vertex_normals()
+    upper = left[(y > armpit - APART_BELOW + 0.005) & (y < plan.window[1] - 0.005)]  # (the maps' top)
+    fore = left[arm[left] & (y < armpit - 0.25)]
+    assert len(upper) and len(fore)
+    pts = np.concatenate([body.vertices[upper[:5]] - 0.006 * n[upper[:5]], body.vertices[fore[:5]] - 0.006 * n[fore[:5]]])
+    st = query_points(pt.without, pts, 0.003).status
+    assert (st[:5] == 2).all() and (st[5:] == 0).all(), st

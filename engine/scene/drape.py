@@ -85,6 +85,8 @@ class DrapeResult:
     snapped: int = 0  # seam pairs welded by the stall rule (SewTuning.snap_gap)
     spec: object = None  # the PatternSpec dressed (set by engine.scene.tryon.run_tryon)
     lowering: dict | None = None  # dressed with the arms raised: the lowering's figures (engine.scene.arms)
+    released: bool | None = None  # cloth passed through parts of the body (drape's release): whether the
+    # whole body took over at a settle (False: the drape never settled); None: nothing passed through
     collide_every: dict = field(default_factory=dict)  # steps between collision checks by stage
     self_contact: tuple[bool, str] = (False, "")  # cloth-cloth contact: on, and why (engine.scene.layers)
     vertex_map: np.ndarray | None = None  # (N unsewn,) each garment vertex's index in positions (None: not sewn)
@@ -536,6 +538,7 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
     n_give_up = max(1, int(round(t.knit_give_up_after / (sub * dt))))
     every_step_from = None
     drift, guard_steps, guard_share = np.inf, 0, 0.0
+    released = None if release is None else False  # (whether the whole body took over at a settle)
     for it in range(budget):
         # gravity goes on growing from where sewing left it (no second ramp from zero)
         control.gravity_scale = min(1.0, gravity_from + (it + 1) * dt / ramp)
@@ -582,14 +585,15 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
                 if release is not None:
                     caught = release[0].caught(collider, state.x, release[1])
                     solver.set_collider(collider)
-                    release = None
+                    release, released = None, True
                     if caught:  # (the parts left out meet the cloth: it settles again against them)
                         snaps.clear()
                         snaps.append(state.x.copy())
-                        min_it = it + 1 + window
                         continue
                 settled = True
                 break
+    if release is not None:  # (it never settled: what it ends as meets the whole body from here on)
+        solver.set_collider(collider)
     strain = solver.max_strain(state)
     if strain > refuse:
         raise _too_small(state, model, strain, fabric, "after draping it is stretched")
@@ -599,7 +603,7 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
                                **{f"{k}_total": solver.timing[k] - timing0.get(k, 0.0) for k in solver.timing}},
                        seam_gap_max=0.0, settled=settled, kinetic_energy=solver.kinetic_energy(state),
                        strain_max=strain, dt=dt, strain_guard=solver.config.strain_guard,
-                       guard_share=guard_share, snapped=0,
+                       guard_share=guard_share, snapped=0, released=released,
                        collide_every={"draping": int(every), **({"every_step_from_s": every_step_from * dt}
                                                                 if every_step_from is not None else {})})
 

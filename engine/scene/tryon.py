@@ -221,6 +221,9 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     finally:
         collider.release()  # (the map collider's query helper thread)
     res.spec = spec
+    if passing is not None and res.released is False:
+        map_info["passed_through"] += ("; the drape did not settle, so the whole body never took over: "
+                                       "an arm may pass through the cloth (look at the pictures)")
     if lift is not None:
         from engine.scene.arms import lower_arms
 
@@ -372,9 +375,11 @@ def _arms_passed(body: Body, garment, plan: TryOnPlan, request: TryOnOptions, to
         keep = ~arm[body.faces].any(axis=1)
         without = render_body_maps(Body(body.vertices, body.faces[keep]), texel=request.texel, window=plan.window,
                                    tol=tolerance, extent=np.unique(body.faces))  # (the whole body's grid)
-    else:
-        without = render_body_maps(body, texel=request.texel, window=plan.window, tol=tolerance,
-                                   segments=[s for s in plan.segments if "arm" not in s])
+    else:  # the hanging parts labelled no segment's: every map draws the rest (an arm not hanging whole)
+        seg = np.asarray(body.segments).copy()
+        seg[arm] = 255
+        without = render_body_maps(Body(body.vertices, body.faces, segments=seg), texel=request.texel,
+                                   window=plan.window, tol=tolerance, segments=plan.segments)
     names = ", ".join(garment.panel_names[i] for i in np.flatnonzero(lower))
     return PassThrough(without, lower[garment.panel],
                        f"{names}: passed through the hanging arms while sewn and until the drape first settled "
@@ -399,11 +404,11 @@ def _slid(body: Body, res: DrapeResult, shift: dict, placement_note: str | None,
 def rode_up(shift: dict, strain: float, fabric) -> bool:
     """Whether a garment placed where it is worn rode up: its bulk rose RODE_UP and it ended tight
     (stretched past the fabric's threshold + TIGHT)."""
-    return shift.get("bulk", shift["top"]) > RODE_UP and strain > fabric.strain_threshold + TIGHT
+    return shift["bulk"] > RODE_UP and strain > fabric.strain_threshold + TIGHT
 
 
 def _rode_up(res: DrapeResult, shift: dict, fab) -> SimulationError:
-    """A garment the catalogue placed where it is worn that rose RODE_UP and ended tight: too small
+    """A garment placed where it is worn (the catalogue, a DXF) that rose RODE_UP and ended tight: too small
     round the body there, it was pushed up to where the body is narrower (an XS shirt over a
     97.5 cm bust rose 9 cm and ended 6 % stretched, where it would be 19 % round the bust)."""
     err = SimulationError(
@@ -578,10 +583,11 @@ def shortest_panel(garment: Garment, res: DrapeResult) -> tuple[float, str, floa
         across = []  # its seams across it (not side seams running down): (mean draped height, vertices, length)
         mine = on[seams]
         for s in np.unique(sid[mine.any(1)]):
-            v = seams[sid == s][mine[sid == s]]
-            n = np.linalg.norm(np.diff(garment.uv[v], axis=0), axis=1).sum() if len(v) >= 2 else 0.0
-            if len(v) >= 2 and np.ptp(y1[v]) <= 0.5 * n:
-                across.append((float(y1[v].mean()), v, n))
+            for side in seams[sid == s].T:  # (each edge of the stitch on this panel: a dart has two)
+                v = side[on[side]]
+                n = np.linalg.norm(np.diff(garment.uv[v], axis=0), axis=1).sum() if len(v) >= 2 else 0.0
+                if len(v) >= 2 and np.ptp(y1[v]) <= 0.5 * n:
+                    across.append((float(y1[v].mean()), v, n))
         # (not a stub of a seam: a ruffle tier 5 cm wide sewn 5.5 m round to the tier above has
         # side seams 3.5 cm long that lie level, higher than the gathered top it hangs from)
         longest = max((n for _, _, n in across), default=0.0)
