@@ -2,8 +2,9 @@
 
 GarmentCode's simulator lets the cloth of lower garments pass through the arms (it labels cloth
 by the nearest body part and a leg's cloth ignores the arms' faces): a wide skirt placed round
-the hips otherwise catches on a hand hanging beside it while its side seams close. Sewing does
-the same here (engine.scene.tryon), and needs to know which of the body is a hanging arm.
+the hips otherwise catches on a hand hanging beside it while its side seams close. Sewing and
+the drape until it first settles do the same here (engine.scene.tryon._arms_passed), and need to
+know which of the body is a hanging arm.
 """
 
 from __future__ import annotations

@@ -151,7 +151,8 @@ def face_point_mask(vertex_mask: np.ndarray, quads: np.ndarray, tris: np.ndarray
 class ExemptCollider(Collider):
     """A MapCollider whose points in `exempt` (one flag per checked point, face_point_mask) are
     answered from other maps, `without` (the body less some parts: the hanging arms, which a
-    lower garment's cloth passes through while it is sewn, engine.body.hanging). The answers are
+    lower garment's cloth passes through while it is sewn and until its drape first settles,
+    engine.body.hanging). The answers are
     the full collider's buffers, so the solver's carried answers work as with it alone."""
 
     depth_along_z = True
