@@ -70,16 +70,22 @@ def plan_maps(body: Body, garment: Garment, texel: float, collision: str) -> Try
     return TryOnPlan(texel, window, segs, left)
 
 
+def _armpit_y(body: Body) -> float:
+    """The armpits' world height (engine.body.measure), or NaN where the body cannot be measured."""
+    from engine.body.measure import measure
+
+    try:
+        return float(body.vertices[:, 1].min()) + float(measure(body).armpit_height)
+    except TryonError:
+        return float("nan")
+
+
 def _over_the_shoulders(garment, body: Body, inside, note: str | None) -> str | None:
     """Raise a pattern file's placed garment until its seams above the armpits can close over
     the body (engine.garment.place.seam_lift); returns the placement note, saying so."""
-    from engine.body.measure import measure
     from engine.garment.place import seam_lift
 
-    try:
-        armpit = float(body.vertices[:, 1].min()) + float(measure(body).armpit_height)
-    except TryonError:
-        return note
+    armpit = _armpit_y(body)
     if not np.isfinite(armpit):
         return note
     dy = seam_lift(garment.positions, garment.seams, inside, armpit)
@@ -328,13 +334,9 @@ def _arms_passed(body: Body, garment, plan: TryOnPlan, request: TryOnOptions, to
     if request.collision != "image" or (plan.segments is not None and not any("arm" in s for s in plan.segments)):
         return None
     from engine.body.hanging import hanging_arms
-    from engine.body.measure import measure
 
-    try:
-        armpit = float(body.vertices[:, 1].min()) + float(measure(body).armpit_height)
-    except TryonError:
-        return None
-    arm = hanging_arms(body, armpit)
+    armpit = _armpit_y(body)
+    arm = hanging_arms(body, armpit)  # (None where the armpits cannot be found)
     if arm is None:
         return None
 
