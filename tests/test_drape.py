@@ -1000,3 +1000,71 @@ def test_a_stall_of_lone_pairs_is_eased_in_up_to_snap_lone_gap():
 
     assert stall(lone=True) == (True, True, False)  # eased in
     assert stall(lone=False) == (True, False, True)  # given up
+
+
+def test_the_outline_through_the_crotch_is_measured_below_a_height():
+    """sagittal_length: a box 0.4 wide, 0.6 tall, 0.2 deep standing on the floor, cut at x = 0.01
+    below 0.5 m: down the front (0.5), across the bottom (0.2), up the back (0.5)."""
+    import trimesh
+
+    from engine.scene.drape import sagittal_length
+
+    box = trimesh.creation.box(extents=(0.4, 0.6, 0.2))
+    box.apply_translation((0.0, 0.3, 0.0))
+    length, low = sagittal_length(np.asarray(box.vertices), np.asarray(box.faces), 0.01, 0.5)
+    assert length == pytest.approx(1.2, abs=1e-9) and low == pytest.approx(0.0, abs=1e-12)
+    assert sagittal_length(np.asarray(box.vertices), np.asarray(box.faces), 0.3, 0.5)[0] == 0.0  # (misses it)
+
+
+def test_a_crotch_seam_left_open_under_the_body_names_a_rise_too_short():
+    """An open pair under mean_female's crotch (front and back 12 cm apart): with 25 cm of flat
+    cloth from each side up its panel to the panel's top at 1.07 m (50 cm) against the body's
+    ~80 cm through the crotch from there, the stall is said to be a rise too short, with both
+    lengths; with 45 cm each (90 cm) nothing is said; nor for a pair far from the crotch."""
+    from types import SimpleNamespace
+
+    from engine.body import resolve_body
+    from engine.collide.bvh import MeshBVH
+    from engine.scene.drape import _crotch_short
+
+    body = resolve_body(str(SAMPLE_BODY))
+    bvh = MeshBVH(body.vertices, body.faces)
+    xc = float(np.median(body.vertices[:, 0]))
+    x = np.array([[xc, 0.74, 0.06], [xc, 1.07, 0.10], [xc, 0.74, -0.06], [xc, 1.07, -0.10]])
+
+    def said(reach: float, at: np.ndarray = x):
+        uv = np.array([[0.0, 0.0], [0.0, reach], [0.0, 0.0], [0.0, reach]])
+        garment = SimpleNamespace(panel=np.array([0, 0, 1, 1]), uv=uv, seams=np.array([[0, 2]]))
+        return _crotch_short(SimpleNamespace(body=bvh, garment=garment), SimpleNamespace(x=at), np.zeros(1, bool))
+
+    short = said(0.25)
+    assert short is not None and "at most 50 cm of cloth" in short and "rise is too short" in short, short
+    body_cm = float(re.search(r"the body measures (\d+) cm", short).group(1))
+    assert 70 <= body_cm <= 90, short
+    assert said(0.45) is None
+    aside = x.copy()
+    aside[[0, 2], 0] += 0.15  # (the pair beside a thigh, not under the crotch)
+    assert said(0.25, aside) is None
+
+
+@pytest.mark.integration
+def test_a_drape_that_settles_past_polish_at_goes_on_until_it_settles_again():
+    """DrapeTuning.polish_at: a drape that settles stretched past the fabric's threshold + it goes
+    on with the strain limit and the contacts alternated twice as often (checked every step)
+    until it settles again, and ends no more stretched. Here with the mark lowered to the
+    threshold itself on the coarse M skirt (it settles at 5-6 %); off, the same drape stops at
+    its first settle."""
+    from engine.body.default import default_body
+    from engine.scene.garments import resolve_garment
+    from engine.scene.tryon import run_tryon
+
+    body = default_body("female")
+    spec, place, name = resolve_garment("skirt", body, "M")
+    runs = {}
+    for mark in (None, 0.0):
+        res, rep = run_tryon(body, spec, TryOnOptions(resolution_cm=3.0), Tuning(drape=DrapeTuning(polish_at=mark)),
+                             place=place, source=name)
+        assert rep["settled"]
+        runs[mark] = (rep["iterations_by_stage"]["draping"], rep["strain"]["max"])
+    assert runs[None][1] > 0.05, runs  # (the mark is passed, so the polish ran)
+    assert runs[0.0][0] > runs[None][0] and runs[0.0][1] <= runs[None][1] + 1e-3, runs

@@ -1,8 +1,8 @@
-"""Patterns that GarmentCode's own generator writes (issue 47), as it writes them: eleven designs
-drawn by ../shared/garmentcode/sample_designs.py (--body mean_female --seed 1, and two of --seed 11; kept in
+"""Patterns that GarmentCode's own generator writes (issue 47), as it writes them: twelve designs
+drawn by ../shared/garmentcode/sample_designs.py (--body mean_female --seed 1, and three of --seed 11; kept in
 tests/garmentcode/designs/, MIT, see its README) covering a waistband, a fitted dress, pants with cuffs, a
 gathered skirt, a collar with skirt levels, a hood, a wide skirt laid out over the hands, a top on narrow straps, and sleeves with a
-fifteen-gore skirt, a strapless top and a sleeveless dress cut with no ease. The default suite reads, checks and meshes them all and drapes five; the slow suite draws a fresh
+fifteen-gore skirt, a strapless top and a sleeveless dress cut with no ease, and a jumpsuit whose crotch is too short. The default suite reads, checks and meshes them all and drapes five; the slow suite draws a fresh
 seeded sample and drapes it (scripts/bench_garmentcode.py's bars)."""
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ def test_the_handful_covers_what_it_says():
     names = set().union(*(_panels(p) for p in FILES))
     for part in ("wb_front", "pant_l_cuff_f", "hood", "collar_front", "ins_skirt_front", "sleeve_f", "skirt_panel"):
         assert any(n.startswith(part) or part in n for n in names), part
-    assert len(FILES) == 11
+    assert len(FILES) == 12
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name[:17])
@@ -186,6 +186,24 @@ def test_a_design_whose_outlines_cross_says_so_when_it_falls():
 
 
 @pytest.mark.integration
+def test_a_jumpsuit_whose_crotch_cannot_reach_the_bodys_says_so():
+    """11_003: GarmentCode sews trousers cut with a low rise to a bodice that ends at the waist
+    (its meta garment keeps the full rise for fitted tops only). The inside leg seams stall 8-9 cm
+    open under the crotch; the error says the rise is too short, with the cloth's length through
+    the crotch (about 55 cm) against the body's from the same height (about 85 cm)."""
+    from engine.body import resolve_body
+    from engine.scene.request import TryOnOptions
+
+    row = _bench().drape_one(DESIGNS / "mean_female_11_003_specification.json", resolve_body(str(BODY)),
+                             TryOnOptions())
+    assert not row["ok"]
+    said = re.search(r"at most (\d+) cm of cloth, where the body measures (\d+) cm through its crotch", row["error"])
+    assert said is not None and "rise is too short" in row["error"], row["error"]
+    cloth, body = int(said.group(1)), int(said.group(2))
+    assert 45 <= cloth <= 65 and 75 <= body <= 95, row["error"]
+
+
+@pytest.mark.integration
 @pytest.mark.parametrize("name", ["mean_female_1_001", "mean_female_1_012"])
 def test_a_waistband_and_a_gathered_skirt_drape_on_their_body(name):
     """Draped on the body they were drawn for, they meet the benchmark's bars: settled, every seam
@@ -321,3 +339,34 @@ def test_the_benchmark_groups_stalls_beside_a_part_too_small_apart():
             "garment may be too small for this body (try a larger size) or the panels start too far apart")
     assert bench.reason(cuff) == "sewing stopped closing after # s of simulated time, beside a part too small for the body"
     assert bench.reason(hood) == "sewing stopped closing after # s of simulated time"
+
+
+@pytest.mark.parametrize("gave_up_at, runs", [(0.52, 2), (0.12, 3)])
+def test_a_pattern_refused_in_cotton_and_in_the_knit_is_not_draped_a_third_time(monkeypatch, gave_up_at, runs):
+    """run_tryon's knit fallback: the cotton drape gave up (DrapeTuning.give_up) and the knit was
+    refused as too small. Where cotton had stayed past its own refusal mark (threshold + too_tight,
+    15 %) the refusal stands at once, saying both (a full cotton drape of 11_001 took 60 s to be
+    refused again at 52 %); below it the cotton drape is run again to its end, as before."""
+    import engine.scene.tryon as tryon
+    from engine.body import resolve_body
+    from engine.errors import SimulationError
+    from engine.pattern.io import load_pattern
+
+    calls = []
+
+    def scripted(body, spec, request, tuning, why, **kw):
+        calls.append((request.fabric, tuning.drape.give_up))
+        knit = request.fabric == tryon.CLOSE_FIT_FABRIC
+        err = SimulationError(f"the garment is too small for this body ({'knit' if knit else 'cotton'})")
+        err.stretched_at, err.too_small = (0.0, 1.0, 0.0), True
+        err.strain = 0.27 if knit else gave_up_at
+        err.gave_up = tuning.drape.give_up and not knit
+        raise err
+
+    monkeypatch.setattr(tryon, "_run_tryon", scripted)
+    spec = load_pattern(DESIGNS / "mean_female_11_026_specification.json")
+    with pytest.raises(SimulationError, match=r"\(cotton\) \(in jersey too: the garment is too small for this "
+                                              r"body \(knit\)\)"):
+        tryon.run_tryon(resolve_body(str(BODY)), spec)
+    assert len(calls) == runs, calls
+    assert calls[:2] == [("cotton", True), ("jersey", False)]

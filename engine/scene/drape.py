@@ -462,7 +462,8 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
             f"{100 * gave_up[1]:.1f}-{100 * gave_up[2]:.1f} cm for {t.snap_stall:.1f} s)")
     again = f" (sewn twice, pulled at {pulls[0]:g} and {pulls[-1]:g} m/s)" if len(pulls) > 1 else ""
     small = _too_small_panels(job, model, state, welded)
-    why = (f"{small}: that part is too small for this body (try a larger size)" if small else
+    crotch = _crotch_short(job, state, welded)
+    why = (crotch if crotch else f"{small}: that part is too small for this body (try a larger size)" if small else
            "The garment may be too small for this body (try a larger size) or the panels start too far apart")
     err = SimulationError(f"sewing {when}{again}; open seams: {names}. {why}")
     err.positions, err.triangles = state.x.copy(), _triangles(model)  # for a picture
@@ -492,6 +493,89 @@ def _too_small_panels(job: _Dressing, model: ClothModel, state: ClothState, weld
     names = ", ".join(f"'{n}' {100 * v:.0f} %" for v, n in found[:4])
     return (f"Beside them the cloth is stretched far past what {job.request.fabric} allows "
             f"({100 * (limit - job.tuning.drape.too_tight):.0f} %) over a tenth of a panel or more: {names}")
+
+
+CROTCH_NEAR = 0.06  # m: open pairs this near the body's centre plane ...
+CROTCH_BELOW = 0.08  # m: ... and this near the height of its crotch meet under it (_crotch_short)
+CROTCH_SHORT = 0.95  # the cloth's way through the crotch shorter than this share of the body's
+
+
+def sagittal_length(verts: np.ndarray, faces: np.ndarray, x0: float, top: float) -> tuple[float, float]:
+    """The body's outline in the plane x = x0 below the height `top` -- down the front, under the
+    crotch, up the back: (its length m, its lowest height m); (0, nan) where the plane misses it."""
+    d = verts[faces, 0] - x0  # (F, 3)
+    cut = (d.min(1) < 0) & (d.max(1) > 0)
+    ends = []
+    for i in range(3):  # where each cut triangle's edges cross the plane (two of its three)
+        a, b = d[cut, i], d[cut, (i + 1) % 3]
+        pa, pb = verts[faces[cut, i]], verts[faces[cut, (i + 1) % 3]]
+        cross = (a > 0) != (b > 0)
+        t = (a / np.where(cross, a - b, 1.0))[:, None]
+        ends.append(np.where(cross[:, None], pa + t * (pb - pa), np.nan))
+    e = np.stack(ends, 1)  # (C, 3, 3)
+    ok = ~np.isnan(e[:, :, 0])
+    two = ok.sum(1) == 2
+    e, ok = e[two], ok[two]
+    first = np.argmax(ok, 1)
+    second = 2 - np.argmax(ok[:, ::-1], 1)
+    p, q = e[np.arange(len(e)), first], e[np.arange(len(e)), second]
+    p, q = np.where((p[:, 1] <= q[:, 1])[:, None], p, q), np.where((p[:, 1] <= q[:, 1])[:, None], q, p)  # p lower
+    below = p[:, 1] < top
+    if not below.any():
+        return 0.0, float("nan")
+    p, q = p[below], q[below]
+    over = q[:, 1] > top  # (a segment crossing the height: its part below)
+    s = np.where(over, (top - p[:, 1]) / np.where(over, q[:, 1] - p[:, 1], 1.0), 1.0)[:, None]
+    return float(np.linalg.norm(s * (q - p), axis=1).sum()), float(p[:, 1].min())
+
+
+def _crotch_length(verts: np.ndarray, faces: np.ndarray, xc: float, top: float) -> tuple[float, float]:
+    """The shortest of sagittal_length's within 1 cm either side of x = xc (where the legs part:
+    a plane just inside a thigh runs down it) and its lowest height."""
+    return min((sagittal_length(verts, faces, xc + dx, top) for dx in np.linspace(-0.01, 0.01, 9)),
+               key=lambda r: r[0] if r[0] > 0 else np.inf)
+
+
+def _crotch_short(job: _Dressing, state: ClothState, welded: np.ndarray) -> str | None:
+    """Where open pairs meet under the body's crotch (within CROTCH_NEAR of its centre plane and
+    CROTCH_BELOW of its lowest point there), whether the cloth can reach round it: the flat
+    distance from each side's point up its panel to that panel's top (where it is held), front
+    and back together, against the body's outline through the crotch from the height the tops
+    hang at. A rise shorter than CROTCH_SHORT of it is named, with both lengths; else None."""
+    if job.body is None:
+        return None
+    g, x = job.garment, state.x
+    verts, faces = job.body.verts, job.body.faces
+    xc = float(np.median(verts[:, 0]))
+    pairs = g.seams[~welded]
+    mid = 0.5 * (x[pairs[:, 0]] + x[pairs[:, 1]])
+    near = np.abs(mid[:, 0] - xc) < CROTCH_NEAR
+    if not near.any():
+        return None
+    _, low = _crotch_length(verts, faces, xc, float(mid[near, 1].max()) + CROTCH_BELOW)
+    near &= np.abs(mid[:, 1] - low) < CROTCH_BELOW
+    if not np.isfinite(low) or not near.any():
+        return None
+    worst = None
+    for a, b in pairs[near]:
+        reach, tops = 0.0, []
+        for v in (a, b):
+            on = np.flatnonzero(g.panel == g.panel[v])
+            top = on[x[on, 1] >= x[on, 1].max() - 0.02]  # (the panel's top edge, as it hangs)
+            reach += float(np.linalg.norm(g.uv[top] - g.uv[v], axis=1).min())
+            tops.append(float(x[top, 1].mean()))
+        y_top = min(tops)
+        body_len, _ = _crotch_length(verts, faces, xc, y_top)
+        if body_len > 0 and reach < CROTCH_SHORT * body_len and (worst is None or reach / body_len < worst[0]):
+            worst = (reach / body_len, reach, body_len, y_top)
+    if worst is None:
+        return None
+    _, reach, body_len, y_top = worst
+    return (f"The open seams meet under the body's crotch, and the cloth cannot reach round it: from the "
+            f"top of the panels either side (at {y_top:.2f} m) down the front to the crotch and up the back is at most "
+            f"{100 * reach:.0f} cm of cloth, where the body measures {100 * body_len:.0f} cm through its "
+            "crotch from that height -- the rise is too short for this body (lengthen the crotch seams, or "
+            "let the top sit lower)")
 
 
 def drape(model: ClothModel, state: ClothState, collider: Collider | None, request: TryOnOptions = TryOnOptions(),
@@ -539,6 +623,7 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
     every_step_from = None
     drift, guard_steps, guard_share = np.inf, 0, 0.0
     released = None if release is None else False  # (whether the whole body took over at a settle)
+    polished, config0 = False, solver.config  # (polish_at: the doubled passes end with this drape)
     for it in range(budget):
         # gravity goes on growing from where sewing left it (no second ramp from zero)
         control.gravity_scale = min(1.0, gravity_from + (it + 1) * dt / ramp)
@@ -590,10 +675,23 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
                         snaps.clear()
                         snaps.append(state.x.copy())
                         continue
+                if (t.polish_at is not None and not polished and strains[-1] > fabric.strain_threshold + t.polish_at):
+                    # (settled with the guard not holding: the strain limit and the contacts
+                    # alternate twice as often, checked every step, until it settles again)
+                    polished = True
+                    if control.collide_every > 1 and tuning.collide_every is None:
+                        control.collide_every = 1
+                        every_step_from = it + 1
+                    solver.config = replace(solver.config, vm_passes=2 * solver.config.vm_passes,
+                                            contact_rounds=2 * solver.config.contact_rounds)
+                    snaps.clear()
+                    snaps.append(state.x.copy())
+                    continue
                 settled = True
                 break
     if release is not None:  # (it never settled: what it ends as meets the whole body from here on)
         solver.set_collider(collider)
+    solver.config = config0
     strain = solver.max_strain(state)
     if strain > refuse:
         raise _too_small(state, model, strain, fabric, "after draping it is stretched")

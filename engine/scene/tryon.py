@@ -147,7 +147,11 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     if second is not None and not second[1]["tight"]:
         second[1]["warnings"].append(f"draped in {knit.name}, a knit: {said}")
         return second
-    if getattr(first, "gave_up", False):  # the knit does not fit either: the first fabric's drape in full
+    refused = fab.strain_threshold + tuning.drape.too_tight
+    hopeless = (getattr(failed, "stretched_at", None) is not None and strain is not None and strain > refused)
+    if getattr(first, "gave_up", False) and not hopeless:
+        # the knit does not fit either: the first fabric's drape in full (not where the first stayed
+        # past its own refusal and the softer knit was refused as too small too: it ends refused)
         say("sewing", 0.0, f"in {knit.name} it does not fit either: draping it in {fab.name} to the end")
         first, _ = in_default(tuning)
         if not isinstance(first, Exception) and not first[1]["tight"]:

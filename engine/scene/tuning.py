@@ -58,6 +58,10 @@ class DrapeTuning:
     max_check_every: int = 2  # ... at least every this many steps
     tight_every_step: float = 0.01  # past the fabric's threshold + this, collisions are checked every step ...
     tight_grace: float = 0.025  # s: ... after this much draping (the strain sewing leaves is worked off first)
+    # a drape that settles stretched past the fabric's threshold + this while checking collisions every
+    # other step goes on, checking every step, until it settles again (None: never): the strain guard
+    # holds threshold + its guard, and where it could not the body pushed back between checks
+    polish_at: float | None = 0.0075
     budget: float = 6.0  # s of simulated time
     min_time: float = 0.1  # s: drape at least this long
     settle_time: float = 0.05  # s: settled when the RMS drift over each of two windows this long ...
@@ -92,6 +96,8 @@ class DrapeTuning:
             v = getattr(self, name)
             if not (0.0 < v <= hi):
                 raise InputError(f"drape {name} {v}: use a positive number up to {hi:g}")
+        if self.polish_at is not None and not (0.0 <= self.polish_at <= 1.0):
+            raise InputError(f"polish_at {self.polish_at}: use 0 .. 1 (strain past the fabric's threshold) or None")
         if not (0.0 <= self.tight_every_step <= 1.0):
             raise InputError(f"tight_every_step {self.tight_every_step}: use 0 .. 1 (strain past the fabric's "
                              "threshold)")
