@@ -557,7 +557,8 @@ def _crotch_short(job: _Dressing, state: ClothState, welded: np.ndarray) -> str 
     if not np.isfinite(low) or not near.any():
         return None
     worst = None
-    for a, b in pairs[near]:
+    gap = np.linalg.norm(x[pairs[near, 0]] - x[pairs[near, 1]], axis=1)
+    for a, b in pairs[near][np.argsort(-gap)[:4]]:  # (the widest four: each pair costs 9 sections of the body)
         reach, tops = 0.0, []
         for v in (a, b):
             on = np.flatnonzero(g.panel == g.panel[v])
