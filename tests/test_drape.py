@@ -1045,6 +1045,9 @@ def test_a_crotch_seam_left_open_under_the_body_names_a_rise_too_short():
     aside = x.copy()
     aside[[0, 2], 0] += 0.15  # (the pair beside a thigh, not under the crotch)
     assert said(0.25, aside) is None
+    before = x.copy()
+    before[2, 2] = 0.10  # (both ends in front: a skirt's centre seam open there)
+    assert said(0.25, before) is None
 
 
 @pytest.mark.integration

@@ -538,7 +538,8 @@ def _crotch_length(verts: np.ndarray, faces: np.ndarray, xc: float, top: float) 
 
 def _crotch_short(job: _Dressing, state: ClothState, welded: np.ndarray) -> str | None:
     """Where open pairs meet under the body's crotch (within CROTCH_NEAR of its centre plane and
-    CROTCH_BELOW of its lowest point there), whether the cloth can reach round it: the flat
+    CROTCH_BELOW of its lowest point there, one end in front and one behind), whether the cloth
+    can reach round it: the flat
     distance from each side's point up its panel to that panel's top (where it is held), front
     and back together, against the body's outline through the crotch from the height the tops
     hang at. A rise shorter than CROTCH_SHORT of it is named, with both lengths; else None."""
@@ -553,8 +554,13 @@ def _crotch_short(job: _Dressing, state: ClothState, welded: np.ndarray) -> str 
     if not near.any():
         return None
     _, low = _crotch_length(verts, faces, xc, float(mid[near, 1].max()) + CROTCH_BELOW)
-    near &= np.abs(mid[:, 1] - low) < CROTCH_BELOW
-    if not np.isfinite(low) or not near.any():
+    if not np.isfinite(low):
+        return None
+    # (a pair from the front to the back, under it: not a skirt's centre seam, open in front)
+    by = (np.abs(verts[:, 1] - low) < 0.05) & (np.abs(verts[:, 0] - xc) < 0.1)
+    zc = float(np.median(verts[by, 2])) if by.any() else float(np.median(verts[:, 2]))
+    near &= (np.abs(mid[:, 1] - low) < CROTCH_BELOW) & ((x[pairs[:, 0], 2] - zc) * (x[pairs[:, 1], 2] - zc) < 0)
+    if not near.any():
         return None
     worst = None
     gap = np.linalg.norm(x[pairs[near, 0]] - x[pairs[near, 1]], axis=1)
