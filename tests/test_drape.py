@@ -1071,3 +1071,23 @@ def test_a_drape_that_settles_past_polish_at_goes_on_until_it_settles_again():
         runs[mark] = (rep["iterations_by_stage"]["draping"], rep["strain"]["max"])
     assert runs[None][1] > 0.05, runs  # (the mark is passed, so the polish ran)
     assert runs[0.0][0] > runs[None][0] and runs[0.0][1] <= runs[None][1] + 1e-3, runs
+
+
+def test_a_top_whose_straps_did_not_hold_fell_off_the_shoulders():
+    """fell_off: a top placed over the shoulders (its top at 1.39 m, shoulders 1.37 m) whose top
+    ended at 1.12 m -- the straps let go and the rest bunched round the hips, its median vertex
+    risen, so it neither slid nor bunched by those tests (GarmentCode's 37_025) -- fell off
+    them, said first; a hood that falls back to 1.40 m did not; nor a strapless top placed
+    under the shoulders (top 1.25 m) that ends at 1.12 m."""
+    from engine.scene.tryon import fell_off, hang_warnings
+
+    placed = np.array([[0.0, 0.77, 0.0], [0.0, 1.39, 0.0]])
+    assert fell_off(placed, placed - [0, 0.27, 0], 1.37) == pytest.approx(0.25)
+    said = hang_warnings({"top": -0.27, "hem": -0.15, "bulk": 0.065}, "the outlines cross", None, 0.25)
+    assert len(said) == 1 and said[0].startswith("the garment fell off the shoulders") and "25 cm" in said[0]
+    assert said[0].endswith("(the outlines cross)")
+    hood = np.array([[0.0, 0.77, 0.0], [0.0, 1.66, 0.0]])
+    assert fell_off(hood, np.array([[0.0, 0.75, 0.0], [0.0, 1.40, 0.0]]), 1.37) is None
+    strapless = np.array([[0.0, 0.77, 0.0], [0.0, 1.25, 0.0]])
+    assert fell_off(strapless, strapless - [0, 0.13, 0], 1.37) is None
+    assert fell_off(placed, placed - [0, 0.27, 0], float("nan")) is None

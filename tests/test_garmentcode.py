@@ -1,8 +1,8 @@
-"""Patterns that GarmentCode's own generator writes (issue 47), as it writes them: twelve designs
-drawn by ../shared/garmentcode/sample_designs.py (--body mean_female --seed 1, and three of --seed 11; kept in
+"""Patterns that GarmentCode's own generator writes (issue 47), as it writes them: thirteen designs
+drawn by ../shared/garmentcode/sample_designs.py (--body mean_female --seed 1, three of --seed 11 and one of --seed 37; kept in
 tests/garmentcode/designs/, MIT, see its README) covering a waistband, a fitted dress, pants with cuffs, a
 gathered skirt, a collar with skirt levels, a hood, a wide skirt laid out over the hands, a top on narrow straps, and sleeves with a
-fifteen-gore skirt, a strapless top and a sleeveless dress cut with no ease, and a jumpsuit whose crotch is too short. The default suite reads, checks and meshes them all and drapes five; the slow suite draws a fresh
+fifteen-gore skirt, a strapless top and a sleeveless dress cut with no ease, a jumpsuit whose crotch is too short and a top whose straps do not hold. The default suite reads, checks and meshes them all and drapes five; the slow suite draws a fresh
 seeded sample and drapes it (scripts/bench_garmentcode.py's bars)."""
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ def test_the_handful_covers_what_it_says():
     names = set().union(*(_panels(p) for p in FILES))
     for part in ("wb_front", "pant_l_cuff_f", "hood", "collar_front", "ins_skirt_front", "sleeve_f", "skirt_panel"):
         assert any(n.startswith(part) or part in n for n in names), part
-    assert len(FILES) == 12
+    assert len(FILES) == 13
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name[:17])
@@ -183,6 +183,23 @@ def test_a_design_whose_outlines_cross_says_so_when_it_falls():
     assert len(slid) == 1 and slid[0].startswith("the garment slid") and hint in slid[0]
     plain = build_garment(load_pattern(DESIGNS / "mean_female_1_001_specification.json"), h=0.03)
     assert crossing_hint(plain) is None
+
+
+@pytest.mark.integration
+def test_a_top_whose_straps_do_not_hold_is_said_to_fall_off_the_shoulders():
+    """37_025: GarmentCode cuts the bodice's neckline past the armholes, so each strap hangs from a
+    point; the top falls from the shoulders to the hips and bunches there, its median vertex
+    risen -- good numbers (settled, 5 % strain, no penetration) on a garment that is not worn. The
+    report says it fell off the shoulders, with why the straps may not hold, and the benchmark
+    does not count it as draped."""
+    from engine.body import resolve_body
+    from engine.scene.request import TryOnOptions
+
+    row = _bench().drape_one(DESIGNS / "mean_female_37_025_specification.json", resolve_body(str(BODY)),
+                             TryOnOptions())
+    assert not row["ok"] and row["reason"] == "fell off the shoulders (a warning)", row
+    said = [w for w in row["warnings"] if w.startswith("the garment fell off the shoulders")]
+    assert len(said) == 1 and "neckline cut past the armhole" in said[0], row["warnings"]
 
 
 @pytest.mark.integration

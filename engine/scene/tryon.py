@@ -72,12 +72,29 @@ def plan_maps(body: Body, garment: Garment, texel: float, collision: str) -> Try
 
 def _armpit_y(body: Body) -> float:
     """The armpits' world height (engine.body.measure), or NaN where the body cannot be measured."""
+    return _world_height(body, "armpit_height")
+
+
+def _world_height(body: Body, name: str) -> float:
+    """A measured height (engine.body.measure's `name`) in world y, or NaN where the body cannot
+    be measured."""
     from engine.body.measure import measure
 
     try:
-        return float(body.vertices[:, 1].min()) + float(measure(body).armpit_height)
+        return float(body.vertices[:, 1].min()) + float(getattr(measure(body), name))
     except TryonError:
         return float("nan")
+
+
+def fell_off(placed: np.ndarray, draped: np.ndarray, shoulder_y: float) -> float | None:
+    """How far (m) below the shoulders the top of a garment placed over them ended, where that is
+    more than FELL; else None. (A hood or a collar that folds back still rests on the shoulders;
+    straps that did not hold let the whole top down: GarmentCode's necklines cut past the
+    armholes.)"""
+    if not np.isfinite(shoulder_y) or placed[:, 1].max() < shoulder_y - OVER_SHOULDERS:
+        return None
+    below = shoulder_y - float(draped[:, 1].max())
+    return below if below > FELL else None
 
 
 def _over_the_shoulders(garment, body: Body, inside, note: str | None) -> str | None:
@@ -242,6 +259,7 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
         body = loaded
     shift = hang_shift(garment.positions, res.positions, res.vertex_map)
     shrunk = shortest_panel(garment, res)
+    fell = fell_off(garment.positions, res.positions, _world_height(body, "shoulder_height"))
     if slid(shift, SLID_OFF):  # settled, but not on the body: never written as a result
         raise _slid(body, res, shift, placement_note, crossing_hint(garment))
     if not pattern_file and rode_up(shift, res.strain_max, fab):  # (a pattern file's layout may rise into place)
@@ -284,7 +302,7 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
         "sew_friction": {"scale": float(tuning.sew.friction),
                          "why": sew_note or ("asked for" if tuning.sew.friction else "the panels slide into place")},
         "tight": bool(res.strain_max > fab.strain_threshold + TIGHT),
-        "warnings": garment.warnings + hang_warnings(shift, crossing_hint(garment), shrunk) + fit_warnings(res.strain_max, fab, res.settled,
+        "warnings": garment.warnings + hang_warnings(shift, crossing_hint(garment), shrunk, fell) + fit_warnings(res.strain_max, fab, res.settled,
                                                                            tuning.drape.budget, pattern_file),
     }
     if lift is not None:
@@ -505,6 +523,8 @@ def sewing_friction(body: Body, fabric=None) -> tuple[float, str | None]:
 TOP_DROP = 0.10  # m: a garment whose top ends this far below where it was placed slid down the body
 # m: ... and this far, it came off it: an error, not a result (it may meet every other bar)
 SLID_OFF = 0.25
+FELL = 0.15  # m: a garment placed over the shoulders whose top ends this far below them fell off them
+OVER_SHOULDERS = 0.05  # m: (placed over them: its top at least this near their height)
 RODE_UP = 0.06  # m: a catalogue garment whose bulk rose this far and ended tight is too small (_rode_up)
 HEM_RISE = 0.15  # m: ... whose lowest point ends this far above its placed height bunched up ...
 PANEL_TALL = 0.15  # m: ... where a panel placed at least this tall ...
@@ -611,12 +631,16 @@ def shortest_panel(garment: Garment, res: DrapeResult) -> tuple[float, str, floa
 
 
 def hang_warnings(shift: dict[str, float], crossing: str | None = None,
-                  shrunk: tuple[float, str, float, float] | None = None) -> list[str]:
+                  shrunk: tuple[float, str, float, float] | None = None, fell: float | None = None) -> list[str]:
     """What a drape that ended off where it was placed says; crossing: crossing_hint's, said with it.
     shrunk: shortest_panel's; a risen hem is bunching only where a panel also hangs shorter than
     BUNCHED of the length it can hang (GarmentCode stacks a jumpsuit's trousers below its bodice in the
-    layout: they rise into place, hanging full length); None: the risen hem alone says so."""
+    layout: they rise into place, hanging full length); None: the risen hem alone says so.
+    fell: fell_off's (m below the shoulders), said first."""
     out = []
+    if fell is not None:
+        out.append(f"the garment fell off the shoulders: placed over them, its top ended {100 * fell:.0f} cm "
+                   "below them (look at the pictures)")
     if slid(shift, TOP_DROP):
         out.append(f"the garment slid {-100 * shift['top']:.0f} cm down the body from where it was placed: "
                    "it may be too large for this body (try a smaller size)")
