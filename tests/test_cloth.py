@@ -1457,3 +1457,33 @@ def test_the_shear_limit_survives_welding_and_restiffening(garment):
                        math.sqrt(1 + math.sin(math.radians(m.fabric.shear_lock))))
     st = with_stiffness(w, 0.25)
     assert st.bias is w.bias and np.array_equal(st.limit_rest, w.limit_rest)
+
+
+def test_a_sheet_dropped_on_the_ground_lies_on_it():
+    """Control.floor: a square sheet falling from 10 cm above the ground ends lying on it (no
+    vertex below it, all within a few mm of it), its horizontal drift held by friction; without
+    a ground it falls on through that height. A vertex placed under the ground comes back up no
+    faster than FLOOR_VMAX (a layout that put a hem under the feet is not flung up)."""
+    from engine.cloth.config import Control
+    from engine.cloth.passes import FLOOR_VMAX
+    from engine.cloth.welds import rest_on_floor
+
+    flat = square_spec(20.0)
+    g = build_garment(flat, h=H)
+    m = _model(g)
+    p = g.positions  # (a vertical square: laid flat, tilted 3 degrees so that it lands edge first)
+    x0 = np.column_stack([p[:, 0], 0.1 + 0.05 * (p[:, 0] - p[:, 0].min()), p[:, 1] - p[:, 1].mean()])
+    for floor in (0.0, None):
+        solver = ClothSolver(m, collider=None, config=StepConfig())
+        state = ClothState(x0.copy(), np.tile([0.3, 0.0, 0.0], (len(x0), 1)))  # sliding sideways
+        for _ in range(int(round(0.4 / solver.dt))):
+            solver.step(state, Control(damping_scale=50.0, floor=floor))
+        if floor is None:
+            assert state.x[:, 1].max() < -0.1
+        else:
+            assert state.x[:, 1].min() >= -1e-9 and state.x[:, 1].max() < 0.005
+            assert np.abs(state.v[:, 0]).max() < 0.05  # (friction stopped the slide)
+    x = np.array([[0.0, -0.2, 0.0], [0.0, 0.5, 0.0]])
+    v = np.zeros((2, 3))
+    rest_on_floor(x, v, 0.0, 1e-4, 0.5, FLOOR_VMAX)
+    assert v[0, 1] == pytest.approx(FLOOR_VMAX) and v[1, 1] == 0.0

@@ -106,3 +106,4 @@ class Control:
     collide_every: float = 1  # steps between collision checks (a fraction: that many on average)
     sewing: Sewing | None = None  # seams pulled shut (strain recovery and the strain guard wait meanwhile)
     attachment: Attachment | None = None  # vertices held on planes
+    floor: float | None = None  # m: the ground's height: cloth rests on it, with friction (None: none)

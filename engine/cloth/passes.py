@@ -15,7 +15,7 @@ from engine.cloth import kernels_strain as KS
 from engine.cloth.buffers import StepBuffers
 from engine.cloth.config import Attachment, Sewing, StepConfig
 from engine.cloth.model import ClothModel, ClothState
-from engine.cloth.welds import damp_about_panels, hold_on_planes, pull_seams
+from engine.cloth.welds import damp_about_panels, hold_on_planes, pull_seams, rest_on_floor
 from engine.collide.base import Answer
 
 
@@ -67,6 +67,14 @@ def attach(state: ClothState, attachment: Attachment) -> None:
     """The attached vertices brought to their planes (the velocity along each plane kept)."""
     a = attachment
     hold_on_planes(state.x, state.v, a.vertices, a.points, a.normals, a.tau, a.vmax)
+
+
+FLOOR_VMAX = 1.0  # m/s: cloth placed under the ground comes up at most this fast (a jolt otherwise)
+
+
+def floor(state: ClothState, y0: float, dt: float, mu: float) -> None:
+    """The cloth kept above the ground at y0 (Control.floor), with friction mu along it."""
+    rest_on_floor(state.x, state.v, y0, dt, mu, FLOOR_VMAX)
 
 
 def collision_points(state: ClothState, buf: StepBuffers, ahead: float, out: np.ndarray) -> None:

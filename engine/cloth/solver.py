@@ -123,6 +123,8 @@ class ClothSolver:
             passes.sew(m, state, buf, sewing, dt)
         if c.attachment is not None:
             passes.attach(state, c.attachment)
+        if c.floor is not None:
+            passes.floor(state, c.floor, dt, forcing.friction)
         t1 = time.perf_counter()
         # cloth-cloth contact within the cloth, every self_every steps (before the body's
         # response: the body has the last word)

@@ -148,3 +148,22 @@ def hold_on_planes(x, v, idx, points, normals, tau, vmax):
             v[i, 0] += (want - vn) * nx
             v[i, 1] += (want - vn) * ny
             v[i, 2] += (want - vn) * nz
+
+
+@serial_kernel
+def rest_on_floor(x, v, y0, dt, mu, vmax):
+    """The ground (Control.floor): a vertex that would end the step below the height y0 has its
+    downward velocity cut to what reaches y0 (one below it -- a layout that put a hem under the
+    feet -- comes back up at most vmax fast), and its velocity along the ground reduced by mu x
+    that change (Coulomb friction on the impulse): a hem longer than the body is tall lies on
+    the floor instead of hanging through it."""
+    for i in range(x.shape[0]):
+        want = min((y0 - x[i, 1]) / dt, vmax)
+        if v[i, 1] < want:
+            dv = want - v[i, 1]
+            v[i, 1] = want
+            h = np.sqrt(v[i, 0] * v[i, 0] + v[i, 2] * v[i, 2])
+            if h > 0.0:
+                keep = max(0.0, 1.0 - mu * dv / h)
+                v[i, 0] *= keep
+                v[i, 2] *= keep

@@ -127,6 +127,7 @@ class _Dressing:
     layered: bool = False  # with cloth-cloth contact (engine.scene.layers)
     body: object = None  # the body's MeshBVH (seam pairs meeting beside it, SewTuning.meet_outside), or None
     pass_through: PassThrough | None = None  # parts of the body some cloth passes through until it hangs
+    floor: float | None = None  # m: the ground's height (Control.floor), or None
 
     @property
     def exempt(self) -> np.ndarray | None:
@@ -187,19 +188,32 @@ class _Sewn:
     exempt: np.ndarray | None = None  # (N welded,) the vertices that pass through (_Dressing.pass_through)
 
 
+FLOOR_BELOW = 0.01  # m: the ground under the body's soles (ground)
+
+
+def ground(body_vertices: np.ndarray) -> float:
+    """The height the cloth rests on at the body's feet (Control.floor; a gown longer than the
+    body is tall lies on the floor): FLOOR_BELOW under the soles -- cloth the body pushes out
+    through a sole or the rounded edge of a foot (a hem round the feet) ends between foot and
+    floor instead of being fought over (at the soles' own height the hem of 29_008 was pushed
+    back into the foot's edge, 2.6 mm)."""
+    return float(body_vertices[:, 1].min()) - FLOOR_BELOW
+
+
 def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOptions = TryOnOptions(),
                   tuning: Tuning = Tuning(), progress: Progress = _noop, observer: Observer | None = None,
                   attachment: Attachment | None = None, body_bvh=None,
-                  pass_through: PassThrough | None = None) -> DrapeResult:
+                  pass_through: PassThrough | None = None, floor: float | None = None) -> DrapeResult:
     """Sew the placed panels, then drape them, against the same collider (module doc). attachment:
     vertices held on planes while sewing and draping (engine.scene.attach). body_bvh: the body's
     MeshBVH (engine.collide.bvh), for seam pairs whose path runs through the body (None: not).
     pass_through: cloth that passes through parts of the body while it is sewn and until the drape
-    first settles (then it meets the whole body, and settles again where the parts caught it)."""
+    first settles (then it meets the whole body, and settles again where the parts caught it).
+    floor: the ground's height (m): cloth rests on it (Control.floor; None: no ground)."""
     tuning.validate()
     layered = needs_self_contact(garment, tuning)
     job = _Dressing(garment, collider, request, tuning, progress, observer, attachment, layered[0], body_bvh,
-                    pass_through)
+                    pass_through, floor)
     model = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
                         get_fabric(request.fabric), _edge(garment), tuning.cloth)
     state = job.fresh_state()
@@ -213,7 +227,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOpt
     res = drape(model, state, collider, request, tuning, progress, observer,
                 gravity_from=sewn.gravity if sewn else 0.0, solver=solver,
                 attachment=sewn.attachment if sewn else attachment,
-                release=None if exempt is None else (pass_through, exempt))
+                release=None if exempt is None else (pass_through, exempt), floor=floor)
     cloth_t = dict(sewn.timing) if sewn else {"cloth": 0.0, "collision": 0.0}
     for k in cloth_t:
         cloth_t[k] += res.timing[f"{k}_total"]
@@ -252,7 +266,7 @@ def _sew(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSolv
                                         panel_damping=t.far_panel_damping,
                                         **(_meeting(len(pairs)) if far and t.meet_outside and job.body is not None
                                            else {})),
-                          attachment=job.attachment)
+                          attachment=job.attachment, floor=job.floor)
         pull = _pull(job, model, state, solver, control, far, retry=attempt + 1 < len(pulls), gap0=gap0)
         if pull.welded.all():
             break
@@ -588,7 +602,8 @@ def _crotch_short(job: _Dressing, state: ClothState, welded: np.ndarray) -> str 
 def drape(model: ClothModel, state: ClothState, collider: Collider | None, request: TryOnOptions = TryOnOptions(),
           tuning: Tuning = Tuning(), progress: Progress = _noop, observer: Observer | None = None,
           gravity_from: float = 1.0, solver: ClothSolver | None = None,
-          attachment: Attachment | None = None, release: tuple | None = None) -> DrapeResult:
+          attachment: Attachment | None = None, release: tuple | None = None,
+          floor: float | None = None) -> DrapeResult:
     """The drape stage alone (module doc), from `state` (changed in place) of the sewn `model`:
     until the shape stops moving, or the budget ends; a garment left stretched past the fabric's
     threshold + too_tight is refused. Gravity grows from `gravity_from` x g over the rest of the
@@ -596,7 +611,8 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
     attachment: vertices kept in front of planes (engine.scene.attach). The result's seam fields are zero (no seams are open in a sewn model).
     release: (PassThrough, the model's vertices it lets through) while `solver` answers them from the
     body less some parts: when the drape settles, `collider` (the whole body) takes over; where
-    the left-out parts touch the cloth then, the drape goes on until it settles again."""
+    the left-out parts touch the cloth then, the drape goes on until it settles again.
+    floor: the ground's height (m; Control.floor), or None."""
     t = tuning.drape
     tuning.validate()
     fabric = get_fabric(request.fabric)
@@ -607,7 +623,7 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
     every = _drape_every(tuning, dt)
     fire = FireRelaxer() if t.relax == "fire" else None
     control = Control(damping_scale=t.fire_damping if fire is not None else t.damping, collide_every=every,
-                      attachment=attachment)
+                      attachment=attachment, floor=floor)
     ramp = tuning.sew.gravity_ramp if fire is None else min(tuning.sew.gravity_ramp, t.fire_ramp)
     t0 = time.perf_counter()
     it0 = solver.iterations

@@ -19,7 +19,7 @@ from engine.cloth.fabrics import get_fabric
 from engine.errors import InputError, SimulationError, TryonError
 from engine.garment.garment import Garment, build_garment
 from engine.pattern.spec import PatternSpec
-from engine.scene.drape import DrapeResult, Progress, most_stretched, sew_and_drape
+from engine.scene.drape import DrapeResult, Progress, ground, most_stretched, sew_and_drape
 from engine.scene.garments import PATTERN_SIZE_ADVICE, dress_in_size
 from engine.scene.attach import attachment
 from engine.scene.request import TryOnOptions, TryOnRequest
@@ -241,7 +241,8 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
         map_info["passed_through"] = passing.why
     try:
         res = sew_and_drape(garment, collider, request, tuning, progress, observer=observer, attachment=held,
-                            body_bvh=bvh if lift is None else None, pass_through=passing)
+                            body_bvh=bvh if lift is None else None, pass_through=passing,
+                            floor=ground(body.vertices))
     except SimulationError as e:
         _carried_hint(e, placement_note, body)
         raise
@@ -257,8 +258,12 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
         plan_l = plan_maps(lift.rigged, garment, request.texel, request.collision)
         res = lower_arms(lift, res, request, tuning, plan_l, progress=progress, observer=observer)
         body = loaded
-    shift = hang_shift(garment.positions, res.positions, res.vertex_map)
-    shrunk = shortest_panel(garment, res)
+    # (as placed, but no lower than the ground: a layout that put a hem under the feet has it end
+    # on the floor, neither risen nor bunched)
+    placed = garment.positions.copy()
+    placed[:, 1] = np.maximum(placed[:, 1], ground(body.vertices))
+    shift = hang_shift(placed, res.positions, res.vertex_map)
+    shrunk = shortest_panel(garment, res, placed)
     fell = fell_off(garment.positions, res.positions, _world_height(body, "shoulder_height"))
     if slid(shift, SLID_OFF):  # settled, but not on the body: never written as a result
         raise _slid(body, res, shift, placement_note, crossing_hint(garment))
@@ -581,7 +586,8 @@ def sharp_folds(positions: np.ndarray, triangles: np.ndarray, degrees: float = 1
     return {"count": int((angles > np.radians(degrees)).sum()), "edges": int(len(angles)), "degrees": degrees}
 
 
-def shortest_panel(garment: Garment, res: DrapeResult) -> tuple[float, str, float, float] | None:
+def shortest_panel(garment: Garment, res: DrapeResult,
+                   placed: np.ndarray | None = None) -> tuple[float, str, float, float] | None:
     """Of the panels placed at least PANEL_TALL tall, the one whose drape is shortest for the
     length it can hang: (draped height / that length, its name, draped m, length m); None when no
     panel is that tall or the drape has no map from the garment's vertices. The length is the
@@ -589,14 +595,15 @@ def shortest_panel(garment: Garment, res: DrapeResult) -> tuple[float, str, floa
     across it that end highest (within HUNG_FROM of the highest: a tier's to the tier above, a
     peplum's to the bodice's pieces, a bodice's shoulder seam; a seam dropping more than half its
     length runs down the side; a panel sewn across nowhere hangs from its top HUNG_FROM). A ring
-    sector (a circle peplum, a ruffle tier) laid out flat 95 cm tall hangs its ring's width, 17 cm."""
+    sector (a circle peplum, a ruffle tier) laid out flat 95 cm tall hangs its ring's width, 17 cm.
+    placed: the garment's positions to measure from (default garment.positions)."""
     from scipy.spatial import cKDTree
 
     vmap = res.vertex_map
     if vmap is None or len(vmap) != len(garment.positions):
         return None
     best = None
-    y0, y1 = garment.positions[:, 1], res.positions[vmap, 1]
+    y0, y1 = (garment.positions if placed is None else placed)[:, 1], res.positions[vmap, 1]
     seams, sid = garment.seams, garment.seam_id
     for p, name in enumerate(garment.panel_names):
         on = garment.panel == p

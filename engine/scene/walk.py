@@ -44,7 +44,7 @@ from engine.cloth.config import Control
 from engine.cloth.model import ClothState, spring_strains, with_stiffness
 from engine.cloth.solver import ClothSolver
 from engine.errors import SimulationError
-from engine.scene.drape import DrapeResult, Progress
+from engine.scene.drape import FLOOR_BELOW, DrapeResult, Progress
 from engine.scene.request import TryOnOptions
 from engine.scene.tuning import Tuning, WalkTuning
 
@@ -146,7 +146,9 @@ def walk_cloth(body: Body, drape: DrapeResult, request: TryOnOptions = TryOnOpti
     stiffen_strain = model.fabric.strain_threshold + t.stiffen_at if t.stiffen_at is not None else np.inf
     step = replace(t.step, velocity_mode=request.velocity_mode)
     solver = ClothSolver(model, collider, step, dt=dt)
-    control = Control(friction_scale=t.friction, collide_every=every)
+    # (the ground under the walk's soles: a hem that lay on the floor stays on it)
+    control = Control(friction_scale=t.friction, collide_every=every,
+                      floor=float(track.frames[..., 1].min()) - FLOOR_BELOW)
     state = ClothState(drape.state.x.copy(), drape.state.v.copy())
     frames = np.empty((n_frames + 1, model.n, 3), np.float32)
     frames[0] = state.x
