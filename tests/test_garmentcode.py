@@ -293,9 +293,10 @@ def test_a_fitted_dress_sewn_from_its_flat_layout_stays_on_the_shoulders():
 
 @pytest.mark.integration
 def test_a_pattern_cut_with_no_ease_is_draped_in_a_knit():
-    """A sleeveless dress GarmentCode cut to the body's own girths stays ~15 % stretched in cotton (5 %
-    allowed): it is a garment for a knit, and is draped again in jersey, the report saying why --
-    unless the user chose the fabric (theirs stands, with the tight warning)."""
+    """A sleeveless dress GarmentCode cut to the body's own girths stays over 10 % stretched in cotton
+    (5 % allowed) as its drape begins: it is a garment for a knit, and is draped again in jersey, the report saying why --
+    unless the user chose the fabric (theirs stands: in cotton it ends at the strain guard's limit
+    all over, 5.5-6 % since a settled drape is polished (DrapeTuning.polish_at), or past it)."""
     from engine.body import resolve_body
     from engine.errors import SimulationError
     from engine.pattern.io import load_pattern
@@ -312,9 +313,9 @@ def test_a_pattern_cut_with_no_ease_is_draped_in_a_knit():
     assert any(re.match("in cotton it (ended|stayed)", m) and "again in jersey" in m for m in said)
     assert any(w.startswith("draped in jersey, a knit") for w in rep["warnings"])
     assert not rep["tight"] and rep["settled"] and rep["penetration_mm"]["max"] <= 2.0
-    try:  # asked for cotton: cotton it is, reported tight (or refused as too small)
+    try:  # asked for cotton: cotton it is, at the guard's limit or past it (or refused as too small)
         _, mine = run_tryon(body, spec, TryOnOptions(fabric="cotton"))
-        assert mine["fabric"] == "cotton" and mine["tight"], (mine["fabric"], mine["strain"])
+        assert mine["fabric"] == "cotton" and mine["strain"]["max"] > 0.055, (mine["fabric"], mine["strain"])
     except SimulationError as e:
         assert "too small" in str(e), str(e)
 

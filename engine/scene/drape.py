@@ -44,7 +44,8 @@ from engine.scene.tuning import Tuning
 if TYPE_CHECKING:  # (the map collider's module loads OpenGL: not at import)
     from engine.collide.collider import PassThrough
 
-FELL_BELOW = -0.05  # m: cloth wholly below this height has fallen off the body (feet stand on y = 0)
+FELL_BELOW = -0.05  # m: cloth wholly below this height has fallen off the body (feet stand on y = 0) ...
+FELL_ON_FLOOR = 0.10  # m: ... or, over a ground, wholly within this of it (a heap on the floor)
 SETTLE_CHECKS = 5  # the settle test runs this many times a window (on the two windows just ended)
 MEET_STEPS = 12  # steps out of the body from a seam pair's midpoint (_meet_beside) ...
 MEET_EVERY = 4  # ... taken every this many gap checks (the body and the cloth move little between)
@@ -659,7 +660,7 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
         if observer is not None and it % observe == 0:
             observer("draping", state.x, tri1, None)
         if it % check_every == 0:
-            _check_finite(state, "draping")
+            _check_finite(state, "draping", floor)
             progress("draping", _settle_fraction(drift, t.settle_speed),
                      f"drift {drift * 100:.2f} cm/s (at rest below {t.settle_speed * 100:.1f})")
         if (it + 1) % sub:
@@ -775,11 +776,11 @@ def _rms_move(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))))
 
 
-def _check_finite(state: ClothState, stage: str) -> None:
+def _check_finite(state: ClothState, stage: str, floor: float | None = None) -> None:
     if not (np.all(np.isfinite(state.x)) and np.all(np.isfinite(state.v))):
         raise SimulationError(f"the cloth became unstable while {stage} (non-finite positions); "
                               "use a smaller time step or a softer fabric")
-    if state.x[:, 1].max() < FELL_BELOW:
+    if state.x[:, 1].max() < (FELL_BELOW if floor is None else floor + FELL_ON_FLOOR):
         raise SimulationError(f"the garment fell off the body while {stage} (all of it below the feet): it is far "
                               "too large for this body, or its pattern places it away from the body; try a "
                               "smaller size, or check the panels' translation")
