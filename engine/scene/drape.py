@@ -194,9 +194,8 @@ FLOOR_BELOW = 0.01  # m: the ground under the body's soles (ground)
 def ground(body_vertices: np.ndarray) -> float:
     """The height the cloth rests on at the body's feet (Control.floor; a gown longer than the
     body is tall lies on the floor): FLOOR_BELOW under the soles -- cloth the body pushes out
-    through a sole or the rounded edge of a foot (a hem round the feet) ends between foot and
-    floor instead of being fought over (at the soles' own height the hem of 29_008 was pushed
-    back into the foot's edge, 2.6 mm)."""
+    through a sole (a hem round the feet) ends between foot and floor instead of being fought
+    over (a ground above the soles pushed it back into the feet: 177 % strain)."""
     return float(body_vertices[:, 1].min()) - FLOOR_BELOW
 
 
@@ -556,10 +555,10 @@ def _crotch_length(verts: np.ndarray, faces: np.ndarray, xc: float, top: float) 
 def _crotch_short(job: _Dressing, state: ClothState, welded: np.ndarray) -> str | None:
     """Where open pairs meet under the body's crotch (within CROTCH_NEAR of its centre plane and
     CROTCH_BELOW of its lowest point there, one end in front and one behind), whether the cloth
-    can reach round it: the flat
-    distance from each side's point up its panel to that panel's top (where it is held), front
-    and back together, against the body's outline through the crotch from the height the tops
-    hang at. A rise shorter than CROTCH_SHORT of it is named, with both lengths; else None."""
+    can reach round it: the flat distance from each side's point up its panel to that panel's top
+    (where it is held), front and back together, against the body's outline through the crotch
+    from the height the tops hang at. A rise shorter than CROTCH_SHORT of it is named, with both
+    lengths; else None."""
     if job.body is None:
         return None
     g, x = job.garment, state.x
