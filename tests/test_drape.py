@@ -1055,18 +1055,18 @@ def test_a_drape_that_settles_past_polish_at_goes_on_until_it_settles_again():
     """DrapeTuning.polish_at: a drape that settles stretched past the fabric's threshold + it goes
     on with the strain limit and the contacts alternated twice as often (checked every step)
     until it settles again, and ends no more stretched. Here with the mark lowered to the
-    threshold itself on the coarse M skirt (it settles at 5-6 %); off, the same drape stops at
-    its first settle."""
-    from engine.body.default import default_body
-    from engine.scene.garments import resolve_garment
+    threshold itself on the sample GarmentCode skirt at 3 cm (a pattern file: a garment placed
+    where it is worn is not polished, tryon); off, the same drape stops at its first settle."""
+    from engine.body import resolve_body
+    from engine.pattern.io import load_pattern
     from engine.scene.tryon import run_tryon
 
-    body = default_body("female")
-    spec, place, name = resolve_garment("skirt", body, "M")
+    body = resolve_body(str(SAMPLE_BODY))
+    spec = load_pattern(SAMPLE_SKIRT)
     runs = {}
     for mark in (None, 0.0):
-        res, rep = run_tryon(body, spec, TryOnOptions(resolution_cm=3.0), Tuning(drape=DrapeTuning(polish_at=mark)),
-                             place=place, source=name)
+        res, rep = run_tryon(body, spec, TryOnOptions(resolution_cm=3.0, fabric="cotton"),
+                             Tuning(drape=DrapeTuning(polish_at=mark)))
         assert rep["settled"]
         runs[mark] = (rep["iterations_by_stage"]["draping"], rep["strain"]["max"])
     assert runs[None][1] > 0.05, runs  # (the mark is passed, so the polish ran)
