@@ -226,6 +226,7 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     if pattern_file:
         placement_note = _over_the_shoulders(garment, body, inside, placement_note)
     plan = plan_maps(body, garment, request.texel, request.collision)
+    floor = ground(body.vertices)  # (the feet do not move when the arms are raised and lowered)
     t0 = time.perf_counter()
     progress("maps", 0.0, "rendering collision maps" if request.collision == "image" else "building the BVH")
     collider, map_info = _body_collider(body, plan, request, tuning.cloth.tolerance)
@@ -247,7 +248,7 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     try:
         res = sew_and_drape(garment, collider, request, tuning, progress, observer=observer, attachment=held,
                             body_bvh=bvh if lift is None else None, pass_through=passing,
-                            floor=ground(body.vertices))
+                            floor=floor)
     except SimulationError as e:
         _carried_hint(e, placement_note, body)
         raise
@@ -266,7 +267,7 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     # (as placed, but no lower than the ground: a layout that put a hem under the feet has it end
     # on the floor, neither risen nor bunched)
     placed = garment.positions.copy()
-    placed[:, 1] = np.maximum(placed[:, 1], ground(body.vertices))
+    placed[:, 1] = np.maximum(placed[:, 1], floor)
     shift = hang_shift(placed, res.positions, res.vertex_map)
     shrunk = shortest_panel(garment, res, placed)
     fell = fell_off(garment.positions, res.positions, _world_height(body, "shoulder_height"))

@@ -44,7 +44,7 @@ from engine.cloth.config import Control
 from engine.cloth.model import ClothState, spring_strains, with_stiffness
 from engine.cloth.solver import ClothSolver
 from engine.errors import SimulationError
-from engine.scene.drape import FLOOR_BELOW, DrapeResult, Progress
+from engine.scene.drape import DrapeResult, Progress, ground
 from engine.scene.request import TryOnOptions
 from engine.scene.tuning import Tuning, WalkTuning
 
@@ -148,7 +148,7 @@ def walk_cloth(body: Body, drape: DrapeResult, request: TryOnOptions = TryOnOpti
     solver = ClothSolver(model, collider, step, dt=dt)
     # (the ground under the walk's soles: a hem that lay on the floor stays on it)
     control = Control(friction_scale=t.friction, collide_every=every,
-                      floor=float(track.frames[..., 1].min()) - FLOOR_BELOW)
+                      floor=ground(track.frames.reshape(-1, 3)))
     state = ClothState(drape.state.x.copy(), drape.state.v.copy())
     frames = np.empty((n_frames + 1, model.n, 3), np.float32)
     frames[0] = state.x
