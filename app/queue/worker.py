@@ -212,7 +212,7 @@ def _run(req: dict, out: Path, progress, live=None) -> dict:
 
     progress("body", 0.0, "loading the body")
     b = req["body"]
-    track = None
+    track, posed = None, []
     if "animation" in b:
         from engine.body.animation import load_animation
 
@@ -221,7 +221,11 @@ def _run(req: dict, out: Path, progress, live=None) -> dict:
     else:
         from engine.scene.arms import clear_arms
 
-        body = clear_arms(resolve_body(b["spec"] if "spec" in b else b["file"]))
+        loaded = resolve_body(b["spec"] if "spec" in b else b["file"])
+        body = clear_arms(loaded)
+        # (the body is dressed and walked in another pose than uploaded: the report says so, as
+        # the command line does)
+        posed = [n for n in body.notes if n not in loaded.notes]
     g = req["garment"]
     walking = req.get("motion", "none") == "walk"
     from app.queue.live_view import LiveView
@@ -230,12 +234,12 @@ def _run(req: dict, out: Path, progress, live=None) -> dict:
     try:
         if live is not None:
             live(view.port)
-        return _simulate(req, body, g, walking, out, progress, view, track)
+        return _simulate(req, body, g, walking, out, progress, view, track, posed)
     finally:
         view.close()
 
 
-def _simulate(req, body, g, walking, out, progress, view, track=None) -> dict:
+def _simulate(req, body, g, walking, out, progress, view, track=None, posed=()) -> dict:
     from engine.scene.request import TryOnOptions, TryOnRequest
     from engine.scene.tryon import dress_request, write_outputs
 
@@ -254,6 +258,7 @@ def _simulate(req, body, g, walking, out, progress, view, track=None) -> dict:
     request = TryOnRequest(garment=g["name"] if catalogue else g["file"], size=size, **g.get("dxf", {}), **options)
     res, report = dress_request(body, request, progress=lambda stage, f, msg: progress(stage, f, retry[0] + msg),
                                 observer=view, note=note, label=None if catalogue else g.get("label"))
+    report["warnings"][:0] = list(posed)
     out.mkdir(parents=True, exist_ok=True)
     write_outputs(out, body, res, report, size=500)
     if walking:

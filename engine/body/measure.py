@@ -358,9 +358,10 @@ def _measure(body) -> Measurements:
     if m.arm_gap < ARM_GAP_OK:
         m.notes.append(f"the arms hang {100 * m.arm_gap:.1f} cm from the torso {100 * ARM_GAP_BELOW:.0f} cm below "
                        f"the armpits: dresses and tops are sewn reliably from {100 * ARM_GAP_OK:.0f} cm (an "
-                       "A-pose, arms about 45 degrees from the body); closer, they are sewn with friction, "
-                       "and where the seams beside the arms do not close, sewn again with the arms raised "
-                       "and then lowered (slower)")
+                       "A-pose, arms about 45 degrees from the body), so the arms are turned out that far "
+                       "for dressing and walking (where they cannot be, tops are sewn with friction, and "
+                       "where the seams beside the arms do not close, sewn again with the arms raised and "
+                       "then lowered)")
     _torso_girths(prof, h, crotch, armpit, m)
     m.hand_gap = _hand_gap(prof, armpit, m.waist_height)
     _knee(prof, h, crotch, m)

@@ -479,9 +479,11 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
     again = f" (sewn twice, pulled at {pulls[0]:g} and {pulls[-1]:g} m/s)" if len(pulls) > 1 else ""
     small = _too_small_panels(job, model, state, welded)
     crotch = _crotch_short(job, state, welded)
-    why = (crotch if crotch else f"{small}: that part is too small for this body (try a larger size)" if small else
+    why = (crotch if crotch else f"{small[0]}: that part is too small for this body (try a larger size)" if small else
            "The garment may be too small for this body (try a larger size) or the panels start too far apart")
     err = SimulationError(f"sewing {when}{again}; open seams: {names}. {why}")
+    if small and not crotch:  # (a fit, not the sewing: engine.scene.tryon drapes it in a stretchier knit)
+        err.small_part = small[1]
     err.positions, err.triangles = state.x.copy(), _triangles(model)  # for a picture
     err.too_small = True  # (engine.scene.garments.add_size_hint)
     # where the open seams were placed (engine.scene.garments.arms_in_the_way)
@@ -489,10 +491,12 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
     return err
 
 
-def _too_small_panels(job: _Dressing, model: ClothModel, state: ClothState, welded: np.ndarray) -> str | None:
+def _too_small_panels(job: _Dressing, model: ClothModel, state: ClothState,
+                      welded: np.ndarray) -> tuple[str, float] | None:
     """The panels of the open seams whose cloth is stretched past the fabric's threshold +
     DrapeTuning.too_tight over a tenth of it (90th percentile of its springs) while the seams
-    stall: a cuff or band smaller round than the limb it is to close round, named; else None."""
+    stall: a cuff or band smaller round than the limb it is to close round, named, and the
+    largest of those strains; else None."""
     g = job.garment
     limit = get_fabric(job.request.fabric).strain_threshold + job.tuning.drape.too_tight
     s, strain = spring_strains(model, state.x)
@@ -508,7 +512,8 @@ def _too_small_panels(job: _Dressing, model: ClothModel, state: ClothState, weld
     found.sort(reverse=True)
     names = ", ".join(f"'{n}' {100 * v:.0f} %" for v, n in found[:4])
     return (f"Beside them the cloth is stretched far past what {job.request.fabric} allows "
-            f"({100 * (limit - job.tuning.drape.too_tight):.0f} %) over a tenth of a panel or more: {names}")
+            f"({100 * (limit - job.tuning.drape.too_tight):.0f} %) over a tenth of a panel or more: {names}",
+            found[0][0])
 
 
 CROTCH_NEAR = 0.06  # m: open pairs this near the body's centre plane ...

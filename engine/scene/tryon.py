@@ -123,66 +123,102 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     lift: an engine.scene.arms.ArmLift of `body` -- sew and drape on its raised body (`place`
     made for that body), then lower the arms and settle on `body`.
     A pattern file that names no fabric (nor was one asked for) is draped in DEFAULT_FABRIC; if
-    that leaves it stretched past the fabric's limit (tight, or refused as too small while
-    draping), it has no ease there -- a garment cut that close is sewn from a knit -- and it is
-    draped again in CLOSE_FIT_FABRIC, the report's fabric_why and a warning saying so. That first
-    drape stops as soon as it stays clearly tight (DrapeTuning.give_up). If the knit does not fit
-    either, the first fabric's drape (then run to its end) or its refusal stands, noted."""
+    that leaves it stretched past the fabric's limit (tight, refused as too small while draping,
+    or its seams stalled beside a part stretched far past it), it has no ease there -- a garment
+    cut that close is sewn from a knit -- and it is draped again in each of CLOSE_FIT_FABRICS in
+    turn, stretchier and stretchier, until one fits; the report's fabric_why and a warning say
+    so. Every drape but the last stops as soon as it stays clearly tight (DrapeTuning.give_up).
+    If no knit fits either, the first fabric's drape (then run to its end) or its refusal stands,
+    noted."""
     request, fabric_why = with_fabric(request, spec)
     kw = dict(place=place, source=source, progress=progress, observer=observer, lift=lift)
-    if place is not None or fabric_why != "the default" or request.fabric == CLOSE_FIT_FABRIC:
+    if place is not None or fabric_why != "the default" or request.fabric in CLOSE_FIT_FABRICS:
         return _run_tryon(body, spec, request, tuning, fabric_why, **kw)
     fab = get_fabric(request.fabric)
-
-    def in_default(t: Tuning):
-        try:
-            return _run_tryon(body, spec, request, t, fabric_why, **kw), None
-        except SimulationError as e:
-            if getattr(e, "stretched_at", None) is None:  # (sewing that stalled is not a fit)
-                raise
-            return e, getattr(e, "strain", None)
-
-    # the first drape stops early once it clearly ends tight (DrapeTuning.give_up): the knit follows
-    first, strain = in_default(replace(tuning, drape=replace(tuning.drape, give_up=True)))
-    if not isinstance(first, Exception):
-        if not first[1]["tight"]:
-            return first
-        strain = first[1]["strain"]["max"]
-    how = f"{100 * strain:.0f} % stretched" if strain is not None else "too stretched"
-    knit = get_fabric(CLOSE_FIT_FABRIC)
-    ended = "stayed" if getattr(first, "gave_up", False) else "ended"
-    said = f"in {fab.name} it {ended} {how} where {fab.name} allows {100 * fab.strain_threshold:.0f} %"
-    why = (f"the pattern's fit: {said}: cut with no ease there, it is a garment for a knit (choose the fabric "
-           f"{fab.name} to see it in {fab.name})")
     say = progress or (lambda *a: None)
-    say("sewing", 0.0, f"{said}: draping it again in {knit.name}, a knit")
-    second, failed = None, None
+    quick = replace(tuning, drape=replace(tuning.drape, give_up=True))
+
+    # the first drape stops early once it clearly ends tight (DrapeTuning.give_up): the knits follow
     try:
-        second = _run_tryon(body, spec, request.model_copy(update={"fabric": knit.name}), tuning, why, **kw)
+        first = _run_tryon(body, spec, request, quick, fabric_why, **kw)
     except SimulationError as e:
-        failed = e
-    if second is not None and not second[1]["tight"]:
-        second[1]["warnings"].append(f"draped in {knit.name}, a knit: {said}")
-        return second
+        if not _no_fit(e):  # (sewing that stalled for another reason is not a fit)
+            raise
+        first = e
+    if not isinstance(first, Exception) and not first[1]["tight"]:
+        return first
+    said = [_how_it_fit(fab, first)]
+    tried = []  # (fabric, result or error) of each knit
+    for k, name in enumerate(CLOSE_FIT_FABRICS):
+        knit, last = get_fabric(name), k == len(CLOSE_FIT_FABRICS) - 1
+        why = (f"the pattern's fit: {'; '.join(said)}: cut with no ease there, it is a garment for a knit "
+               f"(choose the fabric {fab.name} to see it in {fab.name})")
+        say("sewing", 0.0, f"{said[-1]}: draping it again in {knit.name}, a knit")
+        try:
+            out = _run_tryon(body, spec, request.model_copy(update={"fabric": knit.name}), tuning if last else quick,
+                             why, **kw)
+        except SimulationError as e:
+            out = e
+        tried.append((knit, out))
+        if not isinstance(out, Exception) and not out[1]["tight"]:
+            out[1]["warnings"].append(f"draped in {knit.name}, a knit: {'; '.join(said)}")
+            return out
+        if isinstance(out, Exception) and not _no_fit(out):
+            break  # (a knit that fails for another reason: a stretchier one would too)
+        said.append(_how_it_fit(knit, out))
+    # no knit fits: the first fabric's drape, or the stretchiest knit's tight one, or the refusal
     refused = fab.strain_threshold + tuning.drape.too_tight
-    hopeless = (getattr(failed, "stretched_at", None) is not None and strain is not None and strain > refused)
+    strain = _fit_strain(first)
+    hopeless = (strain is not None and strain > refused
+                and all(isinstance(o, Exception) and _no_fit(o) for _, o in tried))
     if getattr(first, "gave_up", False) and not hopeless:
-        # the knit does not fit either: the first fabric's drape in full (not where the first stayed
-        # past its own refusal and the softer knit was refused as too small too: it ends refused)
-        say("sewing", 0.0, f"in {knit.name} it does not fit either: draping it in {fab.name} to the end")
-        first, _ = in_default(tuning)
+        # (not where the first stayed past its own refusal and the knits were refused as too
+        # small too: it ends refused)
+        say("sewing", 0.0, f"no knit fits either: draping it in {fab.name} to the end")
+        try:
+            first = _run_tryon(body, spec, request, tuning, fabric_why, **kw)
+        except SimulationError as e:
+            first = e
         if not isinstance(first, Exception) and not first[1]["tight"]:
             return first
-    knit_how = (f"it failed ({failed})" if failed is not None else
-                f"it is tight too (stretched {100 * second[1]['strain']['max']:.0f} %)")
+    knits_how = "; ".join(f"in {knit.name}, a knit, " + (f"it failed ({o})" if isinstance(o, Exception) else
+                                                        f"it is tight too (stretched {100 * o[1]['strain']['max']:.0f} %)")
+                          for knit, o in tried)
     if not isinstance(first, Exception):
-        first[1]["warnings"].append(f"in {knit.name}, a knit, {knit_how}: this is the drape in {fab.name}")
+        first[1]["warnings"].append(f"{knits_how}: this is the drape in {fab.name}")
         return first
-    if second is not None:  # refused in the first fabric, tight in the knit: the knit's drape
-        second[1]["warnings"].append(f"draped in {knit.name}, a knit: {said}")
-        return second
-    first.args = (f"{first} (in {knit.name} too: {failed})",) + tuple(first.args[1:])
+    draped = [(knit, o) for knit, o in tried if not isinstance(o, Exception)]
+    if draped:  # refused in the first fabric, tight in a knit: the stretchiest knit's drape
+        draped[-1][1][1]["warnings"].append(f"draped in {draped[-1][0].name}, a knit: {'; '.join(said)}")
+        return draped[-1][1]
+    too = "".join(f" (in {knit.name} too: {o})" for knit, o in tried)
+    first.args = (f"{first}{too}",) + tuple(first.args[1:])
     raise first
+
+
+def _no_fit(err: Exception) -> bool:
+    """Whether a SimulationError says the garment does not fit (refused as too small, or its seams
+    stalled beside a part stretched far past the fabric) rather than that it could not be sewn."""
+    return getattr(err, "stretched_at", None) is not None or getattr(err, "small_part", None) is not None
+
+
+def _fit_strain(out) -> float | None:
+    """The strain a drape ended or was refused at (a stall: its most stretched part's), or None."""
+    if not isinstance(out, Exception):
+        return out[1]["strain"]["max"]
+    return getattr(out, "strain", None) if getattr(out, "stretched_at", None) is not None else \
+        getattr(out, "small_part", None)
+
+
+def _how_it_fit(fab, out) -> str:
+    """How a drape in `fab` did not fit, in words."""
+    strain = _fit_strain(out)
+    allows = f"{fab.name} allows {100 * fab.strain_threshold:.0f} %"
+    if getattr(out, "small_part", None) is not None:
+        return f"in {fab.name} its seams stopped closing beside cloth stretched {100 * strain:.0f} % where {allows}"
+    how = f"{100 * strain:.0f} % stretched" if strain is not None else "too stretched"
+    ended = "stayed" if getattr(out, "gave_up", False) else "ended"
+    return f"in {fab.name} it {ended} {how} where {allows}"
 
 
 def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tuning, fabric_why: str, *,
@@ -544,7 +580,10 @@ HUNG_FROM = 0.03  # m: ... reaching from its highest seam (sewn to none: its ver
 ACROSS_SHARE = 0.25  # ... of those across it at least this share of the longest as long
 TIGHT = 0.01  # a drape stretched past the fabric's threshold by more than this is reported tight
 # (issue 3's quality limit; the strain guard holds a garment that fits at threshold + 0.5 %, a knit 0.3 %)
-CLOSE_FIT_FABRIC = "jersey"  # a pattern file too tight for the default fabric is draped again in this knit
+# a pattern file too tight for the default fabric is draped again in these knits in turn: a
+# cotton jersey, then one with elastane (GarmentCode cuts bands and cuffs, and some bodices
+# below the waist, smaller round than the body where they sit)
+CLOSE_FIT_FABRICS = ("jersey", "stretch_knit")
 
 
 def fit_warnings(strain: float, fabric, settled: bool, budget: float, pattern_file: bool = False) -> list[str]:
