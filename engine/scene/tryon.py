@@ -127,9 +127,10 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     or its seams stalled beside a part stretched far past it), it has no ease there -- a garment
     cut that close is sewn from a knit -- and it is draped again in each of CLOSE_FIT_FABRICS in
     turn, stretchier and stretchier, until one fits; the report's fabric_why and a warning say
-    so. Every drape but the last stops as soon as it stays clearly tight (DrapeTuning.give_up).
-    If no knit fits either, the first fabric's drape (then run to its end) or its refusal stands,
-    noted."""
+    so. Every drape but the last stops as soon as it stays clearly tight (DrapeTuning.give_up);
+    where the first gave up short of its own refusal mark, it is run to its end before the
+    stretchiest knit. If none fits, the first fabric's drape or the stretchiest knit's (tight,
+    noted) or the first's refusal stands."""
     request, fabric_why = with_fabric(request, spec)
     kw = dict(place=place, source=source, progress=progress, observer=observer, lift=lift)
     if place is not None or fabric_why != "the default" or request.fabric in CLOSE_FIT_FABRICS:
@@ -149,8 +150,22 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
         return first
     said = [_how_it_fit(fab, first)]
     tried = []  # (fabric, result or error) of each knit
+    # the first fabric's drape to its end where it gave up short of its own refusal mark (a drape
+    # can stay tight for seconds, then fit), before the stretchiest knit: the least stretchy
+    # fabric that fits is the drape
+    again = (getattr(first, "gave_up", False) and _fit_strain(first) is not None
+             and _fit_strain(first) <= fab.strain_threshold + tuning.drape.too_tight)
     for k, name in enumerate(CLOSE_FIT_FABRICS):
         knit, last = get_fabric(name), k == len(CLOSE_FIT_FABRICS) - 1
+        if last and again:
+            say("sewing", 0.0, f"{said[-1]}: draping it in {fab.name} to the end")
+            try:
+                first = _run_tryon(body, spec, request, tuning, fabric_why, **kw)
+            except SimulationError as e:
+                first = e
+            if not isinstance(first, Exception) and not first[1]["tight"]:
+                return first
+            said[0] = _how_it_fit(fab, first)
         why = (f"the pattern's fit: {'; '.join(said)}: cut with no ease there, it is a garment for a knit "
                f"(choose the fabric {fab.name} to see it in {fab.name})")
         say("sewing", 0.0, f"{said[-1]}: draping it again in {knit.name}, a knit")
@@ -166,21 +181,7 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
         if isinstance(out, Exception) and not _no_fit(out):
             break  # (a knit that fails for another reason: a stretchier one would too)
         said.append(_how_it_fit(knit, out))
-    # no knit fits: the first fabric's drape, or the stretchiest knit's tight one, or the refusal
-    refused = fab.strain_threshold + tuning.drape.too_tight
-    strain = _fit_strain(first)
-    hopeless = (strain is not None and strain > refused
-                and all(isinstance(o, Exception) and _no_fit(o) for _, o in tried))
-    if getattr(first, "gave_up", False) and not hopeless:
-        # (not where the first stayed past its own refusal and the knits were refused as too
-        # small too: it ends refused)
-        say("sewing", 0.0, f"no knit fits either: draping it in {fab.name} to the end")
-        try:
-            first = _run_tryon(body, spec, request, tuning, fabric_why, **kw)
-        except SimulationError as e:
-            first = e
-        if not isinstance(first, Exception) and not first[1]["tight"]:
-            return first
+    # no fabric fits: the first fabric's drape, or the stretchiest knit's tight one, or the refusal
     knits_how = "; ".join(f"in {knit.name}, a knit, " + (f"it failed ({o})" if isinstance(o, Exception) else
                                                         f"it is tight too (stretched {100 * o[1]['strain']['max']:.0f} %)")
                           for knit, o in tried)
