@@ -40,7 +40,7 @@ def test_the_handful_covers_what_it_says():
     names = set().union(*(_panels(p) for p in FILES))
     for part in ("wb_front", "pant_l_cuff_f", "hood", "collar_front", "ins_skirt_front", "sleeve_f", "skirt_panel"):
         assert any(n.startswith(part) or part in n for n in names), part
-    assert len(FILES) == 13
+    assert len(FILES) == 15
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name[:17])
@@ -318,6 +318,43 @@ def test_a_pattern_cut_with_no_ease_is_draped_in_a_knit():
         assert mine["fabric"] == "cotton" and mine["strain"]["max"] > 0.055, (mine["fabric"], mine["strain"])
     except SimulationError as e:
         assert "too small" in str(e), str(e)
+
+
+@pytest.mark.integration
+def test_a_pattern_too_tight_for_jersey_is_draped_in_a_stretch_knit():
+    """43_002: GarmentCode draws its bodice down to a low-rise skirt, 84 cm round where mean_female
+    measures 100 cm -- in cotton and in jersey it stays far past their limits; it is draped in
+    stretch_knit, the report saying how each fabric before it did not fit."""
+    from engine.body import resolve_body
+    from engine.pattern.io import load_pattern
+    from engine.scene.tryon import run_tryon
+
+    res, rep = run_tryon(resolve_body(str(BODY)), load_pattern(DESIGNS / "mean_female_43_002_specification.json"))
+    assert rep["fabric"] == "stretch_knit", (rep["fabric"], rep["warnings"])
+    assert re.search(r"in cotton it (stayed|ended) \d+ % stretched.*; in jersey it (stayed|ended) \d+ % stretched",
+                     rep["fabric_why"]), rep["fabric_why"]
+    assert any(w.startswith("draped in stretch_knit, a knit: in cotton") for w in rep["warnings"]), rep["warnings"]
+    assert not rep["tight"] and rep["settled"], rep["strain"]
+    assert rep["penetration_mm"]["max"] <= 2.0 and rep["penetration_mm"]["p99"] <= 0.5, rep["penetration_mm"]
+
+
+@pytest.mark.slow
+@pytest.mark.integration
+def test_cuffs_cut_smaller_than_the_arms_are_sewn_in_a_knit():
+    """f_smpl 47_014, a hooded top: in cotton its cuffs' seams stall, the cuffs stretched 21-30 %
+    round SMPL's arms; that is the pattern's fit, not the sewing, so it is sewn again in the
+    knits and drapes in one, the report saying that cotton's seams stalled."""
+    from engine.body import resolve_body
+    from engine.pattern.io import load_pattern
+    from engine.scene.tryon import run_tryon
+    from tests.samples import SMPL_BODY
+
+    spec = load_pattern(DESIGNS / "f_smpl_average_A40_47_014_specification.json")
+    res, rep = run_tryon(resolve_body(str(SMPL_BODY)), spec)
+    assert rep["fabric"] in ("jersey", "stretch_knit"), rep["fabric"]
+    assert "in cotton its seams stopped closing beside cloth stretched" in rep["fabric_why"], rep["fabric_why"]
+    assert not rep["tight"] and rep["settled"], rep["strain"]
+    assert rep["penetration_mm"]["max"] <= 2.0 and rep["penetration_mm"]["p99"] <= 0.5, rep["penetration_mm"]
 
 
 @pytest.mark.slow
