@@ -1092,3 +1092,15 @@ def test_a_top_whose_straps_did_not_hold_fell_off_the_shoulders():
     strapless = np.array([[0.0, 0.77, 0.0], [0.0, 1.25, 0.0]])
     assert fell_off(strapless, strapless - [0, 0.13, 0], 1.37) is None
     assert fell_off(placed, placed - [0, 0.27, 0], float("nan")) is None
+
+
+@pytest.mark.parametrize("bad", [dict(finish_pen=0.0), dict(finish_pen=0.5), dict(finish_budget=0.0),
+                                 dict(finish_budget=60.0)])
+def test_the_exact_finish_refuses_absurd_settings(bad):
+    """DrapeTuning.finish_pen (a depth in metres, or None) and finish_budget (simulated seconds):
+    outside their ranges, a plain refusal naming the setting."""
+    from engine.errors import InputError
+
+    with pytest.raises(InputError, match=next(iter(bad))):
+        DrapeTuning(**bad).validate()
+    DrapeTuning(finish_pen=None).validate()

@@ -91,6 +91,7 @@ class DrapeResult:
     collide_every: dict = field(default_factory=dict)  # steps between collision checks by stage
     self_contact: tuple[bool, str] = (False, "")  # cloth-cloth contact: on, and why (engine.scene.layers)
     vertex_map: np.ndarray | None = None  # (N unsewn,) each garment vertex's index in positions (None: not sewn)
+    finish: dict | None = None  # settled again against the body's mesh (_finish_exact), or None
 
 
 def _noop(stage: str, fraction: float, message: str) -> None:
@@ -230,6 +231,8 @@ def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOpt
                 gravity_from=sewn.gravity if sewn else 0.0, solver=solver,
                 attachment=sewn.attachment if sewn else attachment,
                 release=None if exempt is None else (pass_through, exempt), floor=floor)
+    if body_bvh is not None and request.collision == "image" and tuning.drape.finish_pen is not None:
+        res = _finish_exact(job, res, solver, sewn.attachment if sewn else attachment, floor)
     cloth_t = dict(sewn.timing) if sewn else {"cloth": 0.0, "collision": 0.0}
     for k in cloth_t:
         cloth_t[k] += res.timing[f"{k}_total"]
@@ -734,6 +737,51 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
                        guard_share=guard_share, snapped=0, released=released,
                        collide_every={"draping": int(every), **({"every_step_from_s": every_step_from * dt}
                                                                 if every_step_from is not None else {})})
+
+
+FINISH_REACH = 0.05  # m: the mesh is searched this far round each point (cloth is never deeper)
+
+
+def _finish_exact(job: _Dressing, res: DrapeResult, solver: ClothSolver, attachment, floor) -> DrapeResult:
+    """A drape that ends with cloth deeper in the body than DrapeTuning.finish_pen, measured
+    against its mesh, goes on briefly against the mesh itself (ObjectSpaceCollider) instead of the
+    maps, until it settles again: the maps' 5 mm texels round off the edges of the feet and the
+    tight curves a stretched knit lies on, and cloth resting on the maps' surface there lies 2-3 mm
+    inside the mesh. Kept where it settles less deep and no more stretched; res.finish says so."""
+    from engine.collide.bvh import ObjectSpaceCollider, penetration_depth
+
+    t = job.tuning
+    before = float(penetration_depth(job.body, res.positions)[0].max())
+    if before <= t.drape.finish_pen:
+        return res
+    job.progress("draping", 1.0, f"cloth {1000 * before:.1f} mm inside the body: settling it against the body's "
+                                 "mesh itself")
+    exact = ObjectSpaceCollider(job.body.verts, job.body.faces, tolerance=t.cloth.tolerance, max_distance=FINISH_REACH)
+    tuning = replace(t, drape=replace(t.drape, min_time=t.drape.settle_time, budget=t.drape.finish_budget,
+                                      polish_at=None, give_up=False))
+    maps = solver.collider
+    solver.set_collider(exact)
+    try:
+        fin = drape(res.model, ClothState(res.state.x.copy(), res.state.v.copy()), exact, job.request, tuning,
+                    job.progress, job.observer, gravity_from=1.0, solver=solver, attachment=attachment, floor=floor)
+    except SimulationError as e:
+        fin, why = None, str(e)
+    finally:
+        solver.set_collider(maps)
+    after = float(penetration_depth(job.body, fin.positions)[0].max()) if fin is not None else np.inf
+    kept = fin is not None and fin.settled and after < before and fin.strain_max <= res.strain_max + 0.002
+    res.finish = {**({"failed": why} if fin is None else {}), "penetration_mm_before": 1000 * before, "penetration_mm_after": 1000 * after if fin else None,
+                  "iterations": fin.iterations["draping"] if fin else None, "kept": bool(kept),
+                  "settled": bool(fin.settled) if fin else None, "strain": fin.strain_max if fin else None}
+    if not kept:
+        return res
+    res.finish["strain_before"] = res.strain_max
+    for k, v in fin.timing.items():
+        res.timing[k] = res.timing.get(k, 0.0) + v
+    res.iterations["draping"] += fin.iterations["draping"]
+    res.positions, res.state, res.kinetic_energy = fin.positions, fin.state, fin.kinetic_energy
+    res.strain_max, res.guard_share = fin.strain_max, fin.guard_share
+    return res
 
 
 def _settle_fraction(drift: float, settle_speed: float, start: float = 1.0) -> float:

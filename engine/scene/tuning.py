@@ -63,6 +63,10 @@ class DrapeTuning:
     # holds threshold + its guard, and where it could not the body pushed back between checks
     polish_at: float | None = 0.0075
     budget: float = 6.0  # s of simulated time
+    # a drape whose cloth ends deeper in the body than this (m, against its mesh) settles again
+    # against the mesh itself, for at most finish_budget s (engine.scene.drape._finish_exact; None: never)
+    finish_pen: float | None = 0.0015
+    finish_budget: float = 0.5
     min_time: float = 0.1  # s: drape at least this long
     settle_time: float = 0.05  # s: settled when the RMS drift over each of two windows this long ...
     settle_speed: float = 0.005  # m/s: ... is below this
@@ -98,6 +102,10 @@ class DrapeTuning:
                 raise InputError(f"drape {name} {v}: use a positive number up to {hi:g}")
         if self.polish_at is not None and not (0.0 <= self.polish_at <= 1.0):
             raise InputError(f"polish_at {self.polish_at}: use 0 .. 1 (strain past the fabric's threshold) or None")
+        if self.finish_pen is not None and not (0.0 < self.finish_pen <= 0.05):
+            raise InputError(f"finish_pen {self.finish_pen} m: use a depth in (0, 0.05] or None")
+        if not (0.0 < self.finish_budget <= 10.0):
+            raise InputError(f"finish_budget {self.finish_budget} s: use a time in (0, 10]")
         if not (0.0 <= self.tight_every_step <= 1.0):
             raise InputError(f"tight_every_step {self.tight_every_step}: use 0 .. 1 (strain past the fabric's "
                              "threshold)")
