@@ -93,9 +93,9 @@ def test_arms_held_closer_still_measure(body, meas):
     m = measure(Body(vertices=posed, faces=body.faces, name="arms-down"))
     assert m.arm_gap < 0.02 and m.notes == [  # the arms nearly touch the torso there: said once
         f"the arms hang {100 * m.arm_gap:.1f} cm from the torso 10 cm below the armpits: dresses and "
-        "tops are sewn reliably from 10 cm (an A-pose, arms about 45 degrees from the body); closer, "
-        "they are sewn with friction, and where the seams beside the arms do not close, sewn again with the "
-        "arms raised and then lowered (slower)"]
+        "tops are sewn reliably from 10 cm (an A-pose, arms about 45 degrees from the body), so the arms are "
+        "turned out that far for dressing and walking (where they cannot be, tops are sewn with friction, and "
+        "where the seams beside the arms do not close, sewn again with the arms raised and then lowered)"]
     assert abs(meas.arm_gap - 0.112) < 0.005 and not meas.notes
     for k in ("bust", "underbust", "waist", "hips"):
         assert abs(getattr(m, k) - getattr(meas, k)) < 0.01, (k, getattr(m, k), getattr(meas, k))
