@@ -739,7 +739,8 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
                                                                 if every_step_from is not None else {})})
 
 
-FINISH_REACH = 0.05  # m: the mesh is searched this far round each point (cloth is never deeper)
+FINISH_REACH = 0.05  # m: the mesh is searched this far round each point (cloth this deep is not finished)
+FINISH_STRAIN = 0.002  # the finish is kept only where it ends at most this much more stretched
 
 
 def _finish_exact(job: _Dressing, res: DrapeResult, solver: ClothSolver, attachment, floor) -> DrapeResult:
@@ -769,8 +770,9 @@ def _finish_exact(job: _Dressing, res: DrapeResult, solver: ClothSolver, attachm
     finally:
         solver.set_collider(maps)
     after = float(penetration_depth(job.body, fin.positions)[0].max()) if fin is not None else np.inf
-    kept = fin is not None and fin.settled and after < before and fin.strain_max <= res.strain_max + 0.002
-    res.finish = {**({"failed": why} if fin is None else {}), "penetration_mm_before": 1000 * before, "penetration_mm_after": 1000 * after if fin else None,
+    kept = fin is not None and fin.settled and after < before and fin.strain_max <= res.strain_max + FINISH_STRAIN
+    res.finish = {**({"failed": why} if fin is None else {}), "penetration_mm_before": 1000 * before,
+                  "penetration_mm_after": 1000 * after if fin else None,
                   "iterations": fin.iterations["draping"] if fin else None, "kept": bool(kept),
                   "settled": bool(fin.settled) if fin else None, "strain": fin.strain_max if fin else None}
     if not kept:
