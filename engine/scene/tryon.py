@@ -139,13 +139,17 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     say = progress or (lambda *a: None)
     quick = replace(tuning, drape=replace(tuning.drape, give_up=True))
 
+    def attempt(req: TryOnOptions, t: Tuning, why: str):
+        """A drape's (result, report), or the SimulationError that ended it."""
+        try:
+            return _run_tryon(body, spec, req, t, why, **kw)
+        except SimulationError as e:
+            return e
+
     # the first drape stops early once it clearly ends tight (DrapeTuning.give_up): the knits follow
-    try:
-        first = _run_tryon(body, spec, request, quick, fabric_why, **kw)
-    except SimulationError as e:
-        if not _no_fit(e):  # (sewing that stalled for another reason is not a fit)
-            raise
-        first = e
+    first = attempt(request, quick, fabric_why)
+    if isinstance(first, Exception) and not _no_fit(first):  # (sewing that stalled for another reason)
+        raise first
     if not isinstance(first, Exception) and not first[1]["tight"]:
         return first
     said = [_how_it_fit(fab, first)]
@@ -153,27 +157,21 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     # the first fabric's drape to its end where it gave up short of its own refusal mark (a drape
     # can stay tight for seconds, then fit), before the stretchiest knit: the least stretchy
     # fabric that fits is the drape
-    again = (getattr(first, "gave_up", False) and _fit_strain(first) is not None
-             and _fit_strain(first) <= fab.strain_threshold + tuning.drape.too_tight)
+    strain = _fit_strain(first)
+    again = (getattr(first, "gave_up", False) and strain is not None
+             and strain <= fab.strain_threshold + tuning.drape.too_tight)
     for k, name in enumerate(CLOSE_FIT_FABRICS):
         knit, last = get_fabric(name), k == len(CLOSE_FIT_FABRICS) - 1
         if last and again:
             say("sewing", 0.0, f"{said[-1]}: draping it in {fab.name} to the end")
-            try:
-                first = _run_tryon(body, spec, request, tuning, fabric_why, **kw)
-            except SimulationError as e:
-                first = e
+            first = attempt(request, tuning, fabric_why)
             if not isinstance(first, Exception) and not first[1]["tight"]:
                 return first
             said[0] = _how_it_fit(fab, first)
         why = (f"the pattern's fit: {'; '.join(said)}: cut with no ease there, it is a garment for a knit "
                f"(choose the fabric {fab.name} to see it in {fab.name})")
         say("sewing", 0.0, f"{said[-1]}: draping it again in {knit.name}, a knit")
-        try:
-            out = _run_tryon(body, spec, request.model_copy(update={"fabric": knit.name}), tuning if last else quick,
-                             why, **kw)
-        except SimulationError as e:
-            out = e
+        out = attempt(request.model_copy(update={"fabric": knit.name}), tuning if last else quick, why)
         tried.append((knit, out))
         if not isinstance(out, Exception) and not out[1]["tight"]:
             out[1]["warnings"].append(f"draped in {knit.name}, a knit: {'; '.join(said)}")
