@@ -75,6 +75,10 @@ class ClothModel:
     # grid (the yarns): 1 for a quad's diagonal; 0 for the other springs; how far shear can
     # lengthen it (limit_rest)
     bias: np.ndarray | None = None
+    # (S,) how much longer than its rest a spring may grow before the strain limit holds it, relative
+    # to the model's fabric: (1 + its own fabric's threshold) / (1 + the model's) for the springs of a
+    # part sewn from another fabric (build_model's panel_fabrics); None: every spring the model's
+    allow: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -92,11 +96,16 @@ class ClothModel:
         the longest it can be with its yarns unstretched, the weave sheared up to where it locks
         (Fabric.shear_lock; engine.cloth.fabrics): a quad's diagonal at phi to the yarns lengthens
         by sqrt(1 + |sin 2 phi| sin angle) under a shear of that angle (22.5 % at 30 degrees);
-        every other spring (bias 0) from its rest length. Strain past it stretches yarns."""
-        if self.bias is None:
-            return self.rest
-        lock = np.sin(np.radians(self.fabric.shear_lock))
-        return np.where(self.kind == FLEXION, self.rest, self.rest * np.sqrt(1.0 + self.bias * lock))
+        every other spring (bias 0) from its rest length. Strain past it stretches yarns. A part in
+        another fabric (allow) is measured from its rest times allow: the strain limit holds it at its
+        own fabric's threshold, and a strain read from here is the same share of its own limit."""
+        base = self.rest
+        if self.bias is not None:
+            lock = np.sin(np.radians(self.fabric.shear_lock))
+            base = np.where(self.kind == FLEXION, self.rest, self.rest * np.sqrt(1.0 + self.bias * lock))
+        if self.allow is not None:
+            base = np.where(self.kind == FLEXION, base, base * self.allow)
+        return base
 
     @cached_property
     def runs(self) -> "SpringRuns":
@@ -320,8 +329,11 @@ def csr_adjacency(n: int, springs: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
 
 def build_model(uv: np.ndarray, panel: np.ndarray, lattice: np.ndarray, quads: np.ndarray,
                 tris: np.ndarray, seams: np.ndarray, fabric: Fabric, h: float,
-                params: ClothParams | None = None) -> ClothModel:
-    """Build the model from the flat (unsewn) mesh; weld_model() merges sewn vertices later."""
+                params: ClothParams | None = None, panel_fabrics: dict[int, Fabric] | None = None) -> ClothModel:
+    """Build the model from the flat (unsewn) mesh; weld_model() merges sewn vertices later.
+    panel_fabrics: panel index -> the fabric that panel is sewn from, where not `fabric` (a cuff or
+    band in a knit on a cotton shirt): its springs take that fabric's stiffness, its cloth that
+    fabric's weight, and the strain limit holds it at that fabric's threshold (ClothModel.allow)."""
     params = params or ClothParams()
     if params.stiffness_scale <= 0 or not np.isfinite(params.stiffness_scale):
         raise InputError(f"stiffness scale must be positive, got {params.stiffness_scale}")
@@ -332,6 +344,15 @@ def build_model(uv: np.ndarray, panel: np.ndarray, lattice: np.ndarray, quads: n
         raise InputError("the cloth mesh has coincident vertices (a spring of zero rest length)")
     k = spring_stiffness(kind, fabric, params, h)
     mass = lumped_mass(uv, quads, tris, fabric.density)
+    allow = None
+    if panel_fabrics:
+        allow = np.ones(len(springs))
+        for p, other in panel_fabrics.items():
+            on_v = panel == p
+            on = on_v[a] & on_v[b]  # (a spring lies in one panel until the seams are welded)
+            k = np.where(on, spring_stiffness(kind, other, params, h), k)
+            allow[on] = (1.0 + other.strain_threshold) / (1.0 + fabric.strain_threshold)
+            mass = np.where(on_v, mass * (other.density / fabric.density), mass)
     if np.any(mass <= 0):
         raise InputError("the cloth mesh has vertices that belong to no face")
     mass = np.maximum(mass, MASS_FLOOR * np.median(mass))
@@ -339,7 +360,7 @@ def build_model(uv: np.ndarray, panel: np.ndarray, lattice: np.ndarray, quads: n
     # slanted edge has no yarn beside it, and lengthening it would let the yarns stretch unseen
     d = uv[b] - uv[a]
     bias = np.where(kind == SHEAR, np.abs(2.0 * d[:, 0] * d[:, 1]) / (rest * rest), 0.0)
-    return _biased(_assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, h), bias)
+    return _biased(_assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, h), bias, allow)
 
 
 def spring_stiffness(kind: np.ndarray, fabric: Fabric, params: ClothParams, h: float) -> np.ndarray:
@@ -381,9 +402,10 @@ def spring_strains(model: ClothModel, x: np.ndarray) -> tuple[np.ndarray, np.nda
     return s, np.linalg.norm(x[s[:, 1]] - x[s[:, 0]], axis=1) / model.limit_rest[limited] - 1.0
 
 
-def _biased(model: ClothModel, bias: np.ndarray | None) -> ClothModel:
-    """The model with its springs' bias (ClothModel.bias), set before limit_rest is first read."""
-    model.bias = bias
+def _biased(model: ClothModel, bias: np.ndarray | None, allow: np.ndarray | None = None) -> ClothModel:
+    """The model with its springs' bias and allowance (ClothModel.bias, .allow), set before
+    limit_rest is first read."""
+    model.bias, model.allow = bias, allow
     return model
 
 
@@ -402,7 +424,7 @@ def with_stiffness(model: ClothModel, factor: float, damping_cap: float | None =
     params = replace(model.params, stiffness_scale=model.params.stiffness_scale * factor)
     return _biased(_assemble(model.mass, model.springs, model.rest, k, model.kind, model.quads, model.tris,
                              model.seams, model.fabric, params, model.edge_length,
-                             DAMPING_CAP if damping_cap is None else damping_cap), model.bias)
+                             DAMPING_CAP if damping_cap is None else damping_cap), model.bias, model.allow)
 
 
 def seam_flexion(uv: np.ndarray, springs: np.ndarray, kind: np.ndarray, rest: np.ndarray,
@@ -462,6 +484,7 @@ def weld_model(model: ClothModel, vertex_map: np.ndarray, uv: np.ndarray | None 
     keep = s[:, 0] != s[:, 1]
     s, rest, k, kind = s[keep], model.rest[keep], model.stiffness[keep], model.kind[keep]
     bias = model.bias[keep] if model.bias is not None else None
+    allow = model.allow[keep] if model.allow is not None else None
     key = np.sort(s, axis=1)
     _, first, group = np.unique(_pair_keys(key), return_index=True, return_inverse=True)
     # a spring on both sides of a seam: where the stitched edges differ a little (eased in), the
@@ -480,6 +503,10 @@ def weld_model(model: ClothModel, vertex_map: np.ndarray, uv: np.ndarray | None 
         least = np.full(len(first), np.inf)
         np.minimum.at(least, group.ravel(), bias)
         bias = least[order]
+    if allow is not None:  # a seam between a knit part and another: the knit's (the seam stretches with it)
+        most = np.full(len(first), -np.inf)
+        np.maximum.at(most, group.ravel(), allow)
+        allow = most[order]
     if uv is not None and len(model.seams):
         fs, fr = seam_flexion(uv, model.springs, model.kind, model.rest, model.seams)
         fs = np.sort(vertex_map[fs], axis=1)
@@ -493,6 +520,7 @@ def weld_model(model: ClothModel, vertex_map: np.ndarray, uv: np.ndarray | None 
             kind = np.concatenate([kind, fk])
             k = np.concatenate([k, spring_stiffness(fk, model.fabric, model.params, model.edge_length)])
             bias = np.concatenate([bias, np.zeros(len(new))]) if bias is not None else None
+            allow = np.concatenate([allow, np.ones(len(new))]) if allow is not None else None
     return _biased(_assemble(mass, s.astype(np.int32), rest, k, kind,
                              vertex_map[model.quads].astype(np.int32), vertex_map[model.tris].astype(np.int32),
-                             np.zeros((0, 2), np.int32), model.fabric, model.params, model.edge_length), bias)
+                             np.zeros((0, 2), np.int32), model.fabric, model.params, model.edge_length), bias, allow)

@@ -92,6 +92,7 @@ class DrapeResult:
     self_contact: tuple[bool, str] = (False, "")  # cloth-cloth contact: on, and why (engine.scene.layers)
     vertex_map: np.ndarray | None = None  # (N unsewn,) each garment vertex's index in positions (None: not sewn)
     finish: dict | None = None  # settled again against the body's mesh (_finish_exact), or None
+    held: list[str] = field(default_factory=list)  # panels the strain limit holds at it over a tenth (held_panels)
 
 
 def _noop(stage: str, fraction: float, message: str) -> None:
@@ -203,7 +204,8 @@ def ground(body_vertices: np.ndarray) -> float:
 def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOptions = TryOnOptions(),
                   tuning: Tuning = Tuning(), progress: Progress = _noop, observer: Observer | None = None,
                   attachment: Attachment | None = None, body_bvh=None,
-                  pass_through: PassThrough | None = None, floor: float | None = None) -> DrapeResult:
+                  pass_through: PassThrough | None = None, floor: float | None = None,
+                  panel_fabrics: dict[str, str] | None = None) -> DrapeResult:
     """Sew the placed panels, then drape them, against the same collider (module doc). attachment:
     vertices held on planes while sewing and draping (engine.scene.attach). body_bvh: the body's
     MeshBVH (engine.collide.bvh), for seam pairs whose path runs through the body (None: not).
@@ -212,13 +214,19 @@ def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOpt
     floor: the ground's height (m): cloth rests on it while draping (Control.floor; None: no
     ground). Not while sewing: GarmentCode stacks a jumpsuit's trousers below its bodice in the flat
     layout, under the feet, and they rise into place as they are sewn (held up by the ground at
-    1 m/s instead, f_smpl 2_003's ended 17 % stretched in jersey; it drapes in cotton at 5.5 %)."""
+    1 m/s instead, f_smpl 2_003's ended 17 % stretched in jersey; it drapes in cotton at 5.5 %).
+    panel_fabrics: panel name -> the fabric it is sewn from where not the request's (build_model).
+    A garment refused as too small (in sewing or draping) names on the error, as tight_panels, the
+    panels that were held past their limit (_too_small_panels, held_panels); a drape names them in
+    DrapeResult.held."""
     tuning.validate()
     layered = needs_self_contact(garment, tuning)
     job = _Dressing(garment, collider, request, tuning, progress, observer, attachment, layered[0], body_bvh,
                     pass_through)
+    names = {n: i for i, n in enumerate(garment.panel_names)}
     model = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
-                        get_fabric(request.fabric), _edge(garment), tuning.cloth)
+                        get_fabric(request.fabric), _edge(garment), tuning.cloth,
+                        panel_fabrics={names[n]: get_fabric(f) for n, f in (panel_fabrics or {}).items() if n in names})
     state = job.fresh_state()
     exempt = pass_through.vertices if pass_through is not None else None
     solver = job.solver(model, exempt)
@@ -227,10 +235,17 @@ def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOpt
     t_sew = time.perf_counter() - t0
     if sewn is not None:
         model, state, solver, exempt = sewn.model, sewn.state, sewn.solver, sewn.exempt
-    res = drape(model, state, collider, request, tuning, progress, observer,
-                gravity_from=sewn.gravity if sewn else 0.0, solver=solver,
-                attachment=sewn.attachment if sewn else attachment,
-                release=None if exempt is None else (pass_through, exempt), floor=floor)
+    vmap = sewn.vertex_map if sewn is not None else None
+    guard = dressing_config(request, tuning, layered[0]).strain_guard or 0.0
+    try:
+        res = drape(model, state, collider, request, tuning, progress, observer,
+                    gravity_from=sewn.gravity if sewn else 0.0, solver=solver,
+                    attachment=sewn.attachment if sewn else attachment,
+                    release=None if exempt is None else (pass_through, exempt), floor=floor)
+    except SimulationError as e:
+        if getattr(e, "stretched_at", None) is not None:  # (too small: which parts)
+            e.tight_panels = held_panels(garment, model, e.positions, vmap, get_fabric(request.fabric), guard)
+        raise
     if body_bvh is not None and request.collision == "image" and tuning.drape.finish_pen is not None:
         res = _finish_exact(job, res, solver, sewn.attachment if sewn else attachment, floor)
     cloth_t = dict(sewn.timing) if sewn else {"cloth": 0.0, "collision": 0.0}
@@ -244,7 +259,35 @@ def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOpt
         res.collide_every = {"sewing": sewn.every, **res.collide_every}
         res.vertex_map = sewn.vertex_map
     res.self_contact = layered
+    if res.strain_max > get_fabric(request.fabric).strain_threshold + guard:
+        res.held = held_panels(garment, res.model, res.positions, vmap, get_fabric(request.fabric), guard)
     return res
+
+
+HELD_AT = 0.8  # x the strain guard: a spring past its fabric's threshold by this much is held at its limit ...
+HELD_SHARE = 0.10  # ... and a panel with this share of its springs so held is held (held_panels)
+
+
+def held_panels(garment: Garment, model: ClothModel, x: np.ndarray, vertex_map: np.ndarray | None,
+                fabric, guard: float) -> list[str]:
+    """The panels the strain limit holds at it over HELD_SHARE of their springs or more (the
+    guard holds a spring at threshold + guard): a part smaller round than the body where it sits.
+    On GarmentCode's shirt mean_female 53_009 given up in cotton, its four cuffs (20-25 % of
+    their springs held) and not its sleeves (at most 2 %), although the most stretched springs
+    (75 %) lay in a sleeve beside the gathered seam into its cuff. x: the model's positions (sewn:
+    vertex_map, the garment's vertices -> the model's; None: not sewn)."""
+    panel = np.full(model.n, -1, dtype=np.int64)
+    if vertex_map is None:
+        panel[:] = garment.panel
+    else:
+        panel[vertex_map] = garment.panel  # (a sewn vertex: one of its panels)
+    s, strain = spring_strains(model, x)
+    p0, p1 = panel[s[:, 0]], panel[s[:, 1]]
+    inner = (p0 == p1) & (p0 >= 0)
+    n = np.bincount(p0[inner], minlength=len(garment.panel_names))
+    held = np.bincount(p0[inner], weights=strain[inner] > fabric.strain_threshold + HELD_AT * guard,
+                       minlength=len(garment.panel_names))
+    return [garment.panel_names[p] for p in np.flatnonzero((n >= 10) & (held >= HELD_SHARE * np.maximum(n, 1)))]
 
 
 def _sew(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSolver) -> _Sewn:
@@ -486,7 +529,7 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
            "The garment may be too small for this body (try a larger size) or the panels start too far apart")
     err = SimulationError(f"sewing {when}{again}; open seams: {names}. {why}")
     if small and not crotch:  # (a fit, not the sewing: engine.scene.tryon drapes it in a stretchier knit)
-        err.small_part = small[1]
+        err.small_part, err.tight_panels = small[1], small[2]
     err.positions, err.triangles = state.x.copy(), _triangles(model)  # for a picture
     err.too_small = True  # (engine.scene.garments.add_size_hint)
     # where the open seams were placed (engine.scene.garments.arms_in_the_way)
@@ -495,11 +538,11 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
 
 
 def _too_small_panels(job: _Dressing, model: ClothModel, state: ClothState,
-                      welded: np.ndarray) -> tuple[str, float] | None:
+                      welded: np.ndarray) -> tuple[str, float, list[str]] | None:
     """The panels of the open seams whose cloth is stretched past the fabric's threshold +
     DrapeTuning.too_tight over a tenth of it (90th percentile of its springs) while the seams
-    stall: a cuff or band smaller round than the limb it is to close round, named, and the
-    largest of those strains; else None."""
+    stall: a cuff or band smaller round than the limb it is to close round, named, the
+    largest of those strains, and all their names; else None."""
     g = job.garment
     limit = get_fabric(job.request.fabric).strain_threshold + job.tuning.drape.too_tight
     s, strain = spring_strains(model, state.x)
@@ -516,7 +559,7 @@ def _too_small_panels(job: _Dressing, model: ClothModel, state: ClothState,
     names = ", ".join(f"'{n}' {100 * v:.0f} %" for v, n in found[:4])
     return (f"Beside them the cloth is stretched far past what {job.request.fabric} allows "
             f"({100 * (limit - job.tuning.drape.too_tight):.0f} %) over a tenth of a panel or more: {names}",
-            found[0][0])
+            found[0][0], [n for _, n in found])
 
 
 CROTCH_NEAR = 0.06  # m: open pairs this near the body's centre plane ...

@@ -129,8 +129,12 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     turn, stretchier and stretchier, until one fits; the report's fabric_why and a warning say
     so. Every drape but the last stops as soon as it stays clearly tight (DrapeTuning.give_up);
     where the first gave up short of its own refusal mark, it is run to its end before the
-    stretchiest knit. If none fits, the first fabric's drape or the stretchiest knit's (tight,
-    noted) or the first's refusal stands."""
+    stretchiest knit. Before the knits: where the first drape named the parts it held at the
+    fabric's limit over a tenth of them or more (engine.scene.drape.held_panels: cuffs, bands,
+    a hood cut smaller round than the arm, waist or head) and not the whole garment, it is
+    draped again with those parts in PART_KNIT -- as a maker sews a cuff or band from a rib
+    knit -- and, where that names parts again, once more with those added. If none fits, the
+    first fabric's drape or the stretchiest knit's (tight, noted) or the first's refusal stands."""
     request, fabric_why = with_fabric(request, spec)
     kw = dict(place=place, source=source, progress=progress, observer=observer, lift=lift)
     if place is not None or fabric_why != "the default" or request.fabric in CLOSE_FIT_FABRICS:
@@ -139,10 +143,10 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     say = progress or (lambda *a: None)
     quick = replace(tuning, drape=replace(tuning.drape, give_up=True))
 
-    def attempt(req: TryOnOptions, t: Tuning, why: str):
+    def attempt(req: TryOnOptions, t: Tuning, why: str, parts: dict | None = None):
         """A drape's (result, report), or the SimulationError that ended it."""
         try:
-            return _run_tryon(body, spec, req, t, why, **kw)
+            return _run_tryon(body, spec, req, t, why, panel_fabrics=parts, **kw)
         except SimulationError as e:
             return e
 
@@ -153,6 +157,20 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     if not isinstance(first, Exception) and not first[1]["tight"]:
         return first
     said = [_how_it_fit(fab, first)]
+    # the parts held at the limit in a knit (a rib cuff or band), the rest in the first fabric
+    parts: dict[str, str] = {}
+    out = first
+    for _ in range(PART_ROUNDS):
+        named = [n for n in _tight_parts(out) if n not in parts]
+        if not named or len(parts) + len(named) >= len(spec.pattern.panels):
+            break
+        parts.update({n: PART_KNIT for n in named})
+        say("sewing", 0.0, f"{said[0]}: draping it again with {_listed(parts)} in {PART_KNIT}, a knit")
+        out = attempt(request, quick, fabric_why, parts)
+        if not isinstance(out, Exception) and not out[1]["tight"]:
+            out[1]["warnings"].append(f"{_listed(parts)} sewn from {PART_KNIT}, a knit, as a maker sews a part "
+                                      f"cut smaller round than the body (a rib cuff or band): {said[0]}")
+            return out
     tried = []  # (fabric, result or error) of each knit
     # the first fabric's drape to its end where it gave up short of its own refusal mark (a drape
     # can stay tight for seconds, then fit), before the stretchiest knit: the least stretchy
@@ -195,6 +213,40 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     raise first
 
 
+PART_KNIT = "stretch_knit"  # the fabric of the parts run_tryon finds held at the first fabric's limit
+PART_ROUNDS = 2  # drapes with more such parts in it at most
+
+
+def _tight_parts(out) -> list[str]:
+    """The panels a drape (run_tryon's attempt: (result, report) or error) held at its fabric's limit."""
+    return list(getattr(out, "tight_panels", None) or []) if isinstance(out, Exception) else list(out[0].held)
+
+
+def _listed(parts: dict) -> str:
+    names = [f"'{n}'" for n in parts]
+    return ", ".join(names[:6]) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
+
+
+def part_strains(model, x: np.ndarray, panel_fabrics: dict[str, str]) -> dict:
+    """The strain of the parts in another fabric, against their own rest lengths: the report's
+    strain max reads each spring against its own fabric's limit (ClothModel.allow), as the share of
+    the garment fabric's threshold; this says how far the knit parts themselves stretched."""
+    from engine.cloth.model import FLEXION, spring_strains
+
+    if model.allow is None:
+        return {}
+    s, strain = spring_strains(model, x)
+    allow = model.allow[model.kind != FLEXION]
+    out = {}
+    for name in sorted(set(panel_fabrics.values())):
+        fab = get_fabric(name)
+        own = np.isclose(allow, (1.0 + fab.strain_threshold) / (1.0 + model.fabric.strain_threshold))
+        if own.any():
+            real = (1.0 + strain[own]) * allow[own] - 1.0
+            out[name] = {"max": float(real.max()), "threshold": fab.strain_threshold}
+    return out
+
+
 def _no_fit(err: Exception) -> bool:
     """Whether a SimulationError says the garment does not fit (refused as too small, or its seams
     stalled beside a part stretched far past the fabric) rather than that it could not be sewn."""
@@ -222,8 +274,9 @@ def _how_it_fit(fab, out) -> str:
 
 def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tuning, fabric_why: str, *,
                place=None, source: str = "pattern", progress: Progress | None = None, observer=None,
-               lift=None) -> tuple[DrapeResult, dict]:
-    """run_tryon in the request's fabric (named, and why)."""
+               lift=None, panel_fabrics: dict[str, str] | None = None) -> tuple[DrapeResult, dict]:
+    """run_tryon in the request's fabric (named, and why); panel_fabrics: panel name -> the fabric
+    of the parts sewn from another (engine.scene.drape.sew_and_drape)."""
     from engine.collide.bvh import MeshBVH, penetration_stats
 
     progress = progress or (lambda *a: None)
@@ -283,7 +336,7 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     try:
         res = sew_and_drape(garment, collider, request, tuning, progress, observer=observer, attachment=held,
                             body_bvh=bvh if lift is None else None, pass_through=passing,
-                            floor=floor)
+                            floor=floor, panel_fabrics=panel_fabrics)
     except SimulationError as e:
         _carried_hint(e, placement_note, body)
         raise
@@ -315,6 +368,7 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     tc, tk = res.timing["cloth_total"], res.timing["collision_total"]
     report = {
         "body": body.name, "garment": source, "fabric": request.fabric, "fabric_why": fabric_why,
+        **({"panel_fabrics": dict(panel_fabrics)} if panel_fabrics else {}),
         "collision": request.collision,
         "cloth_vertices": int(len(res.positions)),
         "cloth_vertices_unsewn": int(garment.n_vertices),
@@ -334,7 +388,8 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
         # guard_share says how much of the fit it held in the end (0: none of the last steps)
         "strain": {"max": res.strain_max, "threshold": fab.strain_threshold, "guard": res.strain_guard,
                    "guard_share": res.guard_share,
-                   "at_m": [round(float(c), 4) for c in most_stretched(res.positions, res.model)[1]]},
+                   "at_m": [round(float(c), 4) for c in most_stretched(res.positions, res.model)[1]],
+                   **({"parts": part_strains(res.model, res.positions, panel_fabrics)} if panel_fabrics else {})},
         "seam_gap_mm": {"max": res.seam_gap_max * 1000, "snapped": res.snapped},
         "shift_mm": {k: v * 1000 for k, v in shift.items()},
         "sharp_folds": sharp_folds(res.positions, res.triangles),
