@@ -831,6 +831,69 @@ def _two_strips(h: float = 0.01):
     return uv, m, seams
 
 
+def test_a_part_in_another_fabric_is_held_at_its_own_limit():
+    """build_model's panel_fabrics: B of the two strips sewn from stretch_knit on a cotton model --
+    its springs take the knit's stiffness, its cloth the knit's weight, and the strain limit holds
+    it at the knit's threshold (limit_rest x (1.40 / 1.05)); A keeps cotton's. Welding keeps each
+    spring's allowance (a seam spring shared by both: the knit's, the seam stretching with the
+    knit) and so does restiffening for the walk."""
+    uv, cotton, seams = _two_strips()
+    knit = get_fabric("stretch_knit")
+    h = 0.01
+    panel = np.repeat([0, 1], 6)
+    lattice = np.full((12, 2), -1)
+    quads = np.array([[0, 3, 4, 1], [1, 4, 5, 2], [6, 9, 10, 7], [7, 10, 11, 8]], dtype=np.int32)
+    m = build_model(uv, panel, lattice, quads, np.zeros((0, 3), np.int32), seams, get_fabric("cotton"), h,
+                    panel_fabrics={1: knit})
+    on_b = panel[m.springs[:, 0]] == 1
+    ratio = (1.0 + knit.strain_threshold) / (1.0 + get_fabric("cotton").strain_threshold)
+    limited = m.kind != FLEXION
+    assert np.allclose(m.allow[on_b & limited], ratio) and np.allclose(m.allow[~on_b], 1.0)
+    assert np.allclose(m.limit_rest[on_b & limited], m.rest[on_b & limited] * ratio)
+    assert np.allclose(m.limit_rest[~on_b], cotton.limit_rest[~on_b])
+    structural = m.kind == STRUCTURAL
+    assert np.allclose(m.stiffness[on_b & structural], knit.stretch * m.params.stiffness_scale)
+    assert np.allclose(m.stiffness[~on_b & structural], cotton.stiffness[~on_b & structural])
+    assert m.mass[panel == 1].sum() > 1.5 * cotton.mass[panel == 1].sum()  # (230 g/m^2 against 120)
+    vmap = merge_map(m.n, seams.astype(np.int64))
+    w = weld_model(m, vmap, uv)
+    seam = {tuple(sorted((vmap[a], vmap[b]))) for a, b in ((3, 4), (4, 5))}
+    for k, p in enumerate(np.sort(w.springs, axis=1).tolist()):
+        if tuple(p) in seam:
+            assert np.isclose(w.allow[k], ratio), (p, w.allow[k])
+    assert len(w.allow) == len(w.springs)
+    st = with_stiffness(w, 0.25)
+    assert st.allow is w.allow and np.array_equal(st.limit_rest, w.limit_rest)
+
+
+def test_held_panels_names_the_part_held_at_its_limit():
+    """engine.scene.drape.held_panels: of the two strips, B stretched 6 % (cotton's 5 % and past
+    its guard) is held; A at rest is not. A square panel stretched 6 % all over is held, 3 % is
+    not, and in stretch_knit (40 %) the same 6 % is nothing."""
+    from types import SimpleNamespace
+
+    from engine.scene.drape import held_panels
+
+    uv, m, seams = _two_strips()
+    g = SimpleNamespace(panel=np.repeat([0, 1], 6), panel_names=["A", "B"])
+    x = np.zeros((m.n, 3))
+    x[:, :2] = uv
+    x[6:, :2] = uv[6] + (uv[6:] - uv[6]) * 1.06
+    assert held_panels(g, m, x, None, m.fabric, 0.005) == ["B"]
+    big = build_garment(square_spec(), h=H)
+    m2 = build_model(big.uv, big.panel, big.lattice, big.quads, big.tris, big.seams, get_fabric("cotton"), H)
+    g2 = SimpleNamespace(panel=big.panel, panel_names=big.panel_names)
+    x2 = np.zeros((m2.n, 3))
+    x2[:, :2] = big.uv * 1.06
+    assert held_panels(g2, m2, x2, None, m2.fabric, 0.005) == ["square"]
+    x2[:, :2] = big.uv * 1.03
+    assert held_panels(g2, m2, x2, None, m2.fabric, 0.005) == []
+    k2 = build_model(big.uv, big.panel, big.lattice, big.quads, big.tris, big.seams, get_fabric("cotton"), H,
+                     panel_fabrics={0: get_fabric("stretch_knit")})
+    x2[:, :2] = big.uv * 1.06
+    assert held_panels(g2, k2, x2, None, k2.fabric, 0.005) == []
+
+
 def test_welding_adds_flexion_springs_across_the_seam():
     """Each stitch pair gets a flexion spring from A's neighbour square to the seam to B's, resting
     at the two panels lying flat (2 h); without the flat uv there are none (a free hinge)."""

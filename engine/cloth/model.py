@@ -26,7 +26,7 @@ from functools import cached_property
 
 import numpy as np
 
-from engine.cloth.fabrics import Fabric
+from engine.cloth.fabrics import Fabric, get_fabric
 from engine.errors import InputError
 
 STRUCTURAL, SHEAR, FLEXION = 0, 1, 2
@@ -41,7 +41,11 @@ EASE = 0.10  # stitched edges differing by at most this fraction are eased toget
 class ClothParams:
     """The cloth's physical parameters that are not fabric properties (docs/tuning.md)."""
 
-    stiffness_scale: float = 0.03  # measured stretch and shear stiffness x this (see fabrics.py)
+    stiffness_scale: float = 0.03  # measured stretch and shear stiffness x this (see fabrics.py) ...
+    # ... but each fabric's at least as stiff for its weight as this fabric's (None: no floor): at 0.03
+    # a knit's own springs (jersey 42 N/m, stretch_knit 18) let it sag under its own weight toward its
+    # threshold (a gown 12 % longer than cut), where a real knit stretches well under 1 %
+    sag_as: str | None = "cotton"
     damping: float = 0.02  # viscous damping per unit mass, 1/s (times mass: the seeds' C_vd, N.s/m)
     spring_damping: float = 0.3  # damping along each spring, a fraction of its critical damping 2 sqrt(k m)
     reflection: float = 0.0  # C_refl of eq. 12 (0: the cloth does not bounce off the body)
@@ -364,8 +368,13 @@ def build_model(uv: np.ndarray, panel: np.ndarray, lattice: np.ndarray, quads: n
 
 
 def spring_stiffness(kind: np.ndarray, fabric: Fabric, params: ClothParams, h: float) -> np.ndarray:
-    return np.where(kind == STRUCTURAL, fabric.stretch * params.stiffness_scale,
-                    np.where(kind == SHEAR, fabric.shear * params.stiffness_scale, fabric.bending / (h * h)))
+    stretch, shear = fabric.stretch, fabric.shear
+    if params.sag_as is not None:  # (ClothParams.sag_as: per unit weight, no softer than that fabric)
+        ref = get_fabric(params.sag_as)
+        stretch = max(stretch, ref.stretch * fabric.density / ref.density)
+        shear = max(shear, ref.shear * fabric.density / ref.density)
+    return np.where(kind == STRUCTURAL, stretch * params.stiffness_scale,
+                    np.where(kind == SHEAR, shear * params.stiffness_scale, fabric.bending / (h * h)))
 
 
 def _assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, h,
