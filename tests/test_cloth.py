@@ -18,7 +18,7 @@ from engine.cloth.buffers import limits2
 from engine.cloth.config import Control, StepConfig
 from engine.cloth.fabrics import FABRICS, get_fabric
 from engine.cloth.model import (FLEXION, MASS_FLOOR, MASS_SCALE_PERCENTILE, SHEAR, STRUCTURAL, ClothParams, ClothState,
-                                build_model, lumped_mass, weld_model, with_stiffness)
+                                build_model, lumped_mass, spring_stiffness, weld_model, with_stiffness)
 from engine.cloth.schedule import CheckSchedule
 from engine.cloth.solver import GRAVITY, ClothSolver, FireRelaxer
 from engine.cloth.welds import merge_map, pull_seams
@@ -852,7 +852,7 @@ def test_a_part_in_another_fabric_is_held_at_its_own_limit():
     assert np.allclose(m.limit_rest[on_b & limited], m.rest[on_b & limited] * ratio)
     assert np.allclose(m.limit_rest[~on_b], cotton.limit_rest[~on_b])
     structural = m.kind == STRUCTURAL
-    assert np.allclose(m.stiffness[on_b & structural], knit.stretch * m.params.stiffness_scale)
+    assert np.allclose(m.stiffness[on_b], spring_stiffness(m.kind, knit, m.params, h)[on_b])
     assert np.allclose(m.stiffness[~on_b & structural], cotton.stiffness[~on_b & structural])
     assert m.mass[panel == 1].sum() > 1.5 * cotton.mass[panel == 1].sum()  # (230 g/m^2 against 120)
     vmap = merge_map(m.n, seams.astype(np.int64))
@@ -864,6 +864,22 @@ def test_a_part_in_another_fabric_is_held_at_its_own_limit():
     assert len(w.allow) == len(w.springs)
     st = with_stiffness(w, 0.25)
     assert st.allow is w.allow and np.array_equal(st.limit_rest, w.limit_rest)
+
+
+@pytest.mark.parametrize("name", ["jersey", "stretch_knit", "denim", "silk"])
+def test_no_fabric_sags_more_than_cotton_for_its_weight(name):
+    """ClothParams.sag_as: each fabric's stretch and shear springs are at least as stiff per unit
+    weight as cotton's (a knit at stiffness_scale 0.03 alone sagged toward its threshold under its
+    own weight); a fabric stiffer than that keeps its own; sag_as=None gives the plain scale."""
+    cotton, fab = get_fabric("cotton"), get_fabric(name)
+    kind = np.array([STRUCTURAL, SHEAR, FLEXION])
+    p = ClothParams()
+    k, kc = spring_stiffness(kind, fab, p, H), spring_stiffness(kind, cotton, p, H)
+    assert np.all(k[:2] / fab.density >= kc[:2] / cotton.density * (1 - 1e-12))
+    assert np.isclose(k[0], max(fab.stretch, cotton.stretch * fab.density / cotton.density) * p.stiffness_scale)
+    assert np.isclose(k[2], fab.bending / H ** 2)
+    plain = spring_stiffness(kind, fab, replace(p, sag_as=None), H)
+    assert np.isclose(plain[0], fab.stretch * p.stiffness_scale) and np.isclose(plain[1], fab.shear * p.stiffness_scale)
 
 
 def test_held_panels_names_the_part_held_at_its_limit():
