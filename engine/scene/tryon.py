@@ -131,7 +131,8 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     where the first gave up short of its own refusal mark, it is run to its end before the
     stretchiest knit. Before the knits: where the first drape named the parts it held at the
     fabric's limit over a tenth of them or more (engine.scene.drape.held_panels: cuffs, bands,
-    a hood cut smaller round than the arm, waist or head) and not the whole garment, it is
+    a hood cut smaller round than the arm, waist or head), together at most PART_SHARE of the
+    garment's cloth (more: the garment as a whole is cut for a knit), it is
     draped again with those parts in PART_KNIT -- as a maker sews a cuff or band from a rib
     knit -- and, where that names parts again, once more with those added. If none fits, the
     first fabric's drape or the stretchiest knit's (tight, noted) or the first's refusal stands."""
@@ -160,10 +161,11 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     # the parts held at the limit in a knit (a rib cuff or band), the rest in the first fabric
     parts: dict[str, str] = {}
     out = first
+    areas = _panel_areas(spec)
     for _ in range(PART_ROUNDS):
         named = [n for n in _tight_parts(out) if n not in parts]
-        if not named or len(parts) + len(named) >= len(spec.pattern.panels):
-            break
+        if not named or sum(areas.get(n, 0.0) for n in [*parts, *named]) > PART_SHARE * sum(areas.values()):
+            break  # (most of the garment held: it is a garment for a knit, below)
         parts.update({n: PART_KNIT for n in named})
         say("sewing", 0.0, f"{said[0]}: draping it again with {_listed(parts)} in {PART_KNIT}, a knit")
         out = attempt(request, quick, fabric_why, parts)
@@ -215,6 +217,15 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
 
 PART_KNIT = "stretch_knit"  # the fabric of the parts run_tryon finds held at the first fabric's limit
 PART_ROUNDS = 2  # drapes with more such parts in it at most
+PART_SHARE = 0.25  # ... and those parts at most this share of the garment's cloth (cuffs, bands, a hood)
+
+
+def _panel_areas(spec: PatternSpec) -> dict[str, float]:
+    """Each panel's flat area (m^2), by name."""
+    from engine.pattern import geometry as geo
+
+    rel = spec.properties.curvature_coords == "relative"
+    return {n: abs(geo.signed_area(geo.outline(p, spec.scale, rel))) for n, p in spec.pattern.panels.items()}
 
 
 def _tight_parts(out) -> list[str]:
