@@ -48,7 +48,11 @@ The simulation uses the measured stretch and shear stiffness times `ClothParams.
 (default 0.03): the velocity modification caps the strain at the threshold, which is the point of
 seed 003 §4 -- softer springs allow a larger stable time step (eq. 4), but much softer springs let
 the strain limit lose where the body pushes cloth outward (a waistband on the hips), so the
-default stays at 0.03 (docs/tuning.md, `stiffness_scale`).
+default stays at 0.03 (docs/tuning.md, `stiffness_scale`). No fabric's springs are softer for its
+weight than cotton's (`ClothParams.sag_as`): scaled alone, jersey's and stretch_knit's would let
+them sag under their own weight toward their thresholds (a gown hanging 12 % longer than cut),
+where a real knit stretches well under 1 %; so a knit takes cotton's eq. 4 step, and its
+stretchiness is its threshold.
 """
 
 from __future__ import annotations

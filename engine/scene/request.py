@@ -19,8 +19,10 @@ class TryOnOptions(BaseModel):
 
     fabric: str | None = Field(None, description="cotton, denim, silk, jersey or stretch_knit (elastane jersey: "
                                "leggings); default: the pattern's own -- a DXF of a stretch knit garment suggests "
-                               "stretch_knit -- else cotton (a pattern file too tight in cotton, cut with no "
-                               "ease, is draped again in jersey, and if too tight in jersey too, in stretch_knit)")
+                               "stretch_knit -- else cotton (a pattern file whose cuffs or bands are cut smaller "
+                               "round than the body is draped again with those parts in stretch_knit; one too "
+                               "tight in cotton as a whole, cut with no ease, in jersey, and if too tight in "
+                               "jersey too, in stretch_knit)")
     resolution_cm: float = Field(1.5, ge=0.2, le=20.0, description="cloth edge length, cm")
     texel_mm: float = Field(5.0, ge=0.5, le=50.0, description="collision map texel, mm (seed 003 §5.4: 5 mm)")
     collision: Literal["image", "object"] = Field("image", description="image (depth/normal maps) or object (BVH)")
