@@ -882,8 +882,8 @@ def test_a_stall_beside_a_panel_stretched_far_past_the_fabric_names_that_panel()
     rest = np.concatenate([rest, [0.02]])  # (straight chains: no shear, measured from their rest)
     model = SimpleNamespace(springs=np.concatenate([springs, [[0, 2]]]), rest=rest, limit_rest=rest,
                             kind=np.array([STRUCTURAL] * 38 + [FLEXION]))
-    said, strain = _too_small_panels(job, model, SimpleNamespace(x=x), np.zeros(1, dtype=bool))
-    assert "'cuff' 40 %" in said and "sleeve" not in said, said
+    said, strain, names = _too_small_panels(job, model, SimpleNamespace(x=x), np.zeros(1, dtype=bool))
+    assert "'cuff' 40 %" in said and "sleeve" not in said and names == ["cuff"], (said, names)
     assert abs(strain - 0.40) < 1e-6, strain
     x[:20, 0] = np.arange(20) * 0.01 * 1.05
     assert _too_small_panels(job, model, SimpleNamespace(x=x), np.zeros(1, dtype=bool)) is None
