@@ -289,6 +289,38 @@ def test_bow_tie_outline_is_meshed_as_garmentcode_draws_it():
     assert abs(area - 2 * 0.5 * 0.2 * 0.1) < 0.002  # two triangles of 200 cm^2
 
 
+def _strip(length=60.0, width=0.02) -> dict:
+    return {"vertices": [[0, 0], [length, 0], [length, width], [0, width]],
+            "edges": [{"endpoints": [i, (i + 1) % 4]} for i in range(4)]}
+
+
+def test_a_sliver_hanging_from_one_part_is_left_out_with_a_warning():
+    """GarmentCode draws a flounce of zero length as a strip 0.2 mm wide: too thin to mesh, it is
+    left out with its seams and a warning naming it; the rest meshes and keeps its seams."""
+    from engine.garment.garment import build_garment
+
+    d = {"pattern": {"panels": {"leg": _square_panel(60.0), "frill": _strip()},
+                     "stitches": [[{"panel": "leg", "edge": 0}, {"panel": "frill", "edge": 2}],
+                                  [{"panel": "leg", "edge": 1}, {"panel": "leg", "edge": 3}]]}}
+    g = build_garment(_spec(d), h=0.015)
+    assert g.panel_names == ["leg"] and g.stitch_names == ["leg[1]-leg[3]"]
+    assert len(g.seams) > 0 and set(np.unique(g.seam_id)) == {0}
+    note = [w for w in g.warnings if "frill" in w]
+    assert len(note) == 1 and "0.2 mm wide" in note[0] and "left out" in note[0]
+
+
+def test_a_sliver_joining_two_parts_is_refused():
+    """A sliver sewn between two parts holds them together: leaving it out would drop the garment
+    in two, so meshing refuses it, naming it."""
+    from engine.garment.garment import build_garment
+
+    d = {"pattern": {"panels": {"top": _square_panel(60.0), "band": _strip(), "skirt": _square_panel(60.0)},
+                     "stitches": [[{"panel": "top", "edge": 0}, {"panel": "band", "edge": 2}],
+                                  [{"panel": "band", "edge": 0}, {"panel": "skirt", "edge": 2}]]}}
+    with pytest.raises(InputError, match="'band' is too small to mesh"):
+        build_garment(_spec(d), h=0.015)
+
+
 def test_an_outline_crossing_itself_many_times_is_refused():
     panel = _square_panel()
     n = 40  # a zigzag up the square, closed by a straight edge down its middle: dozens of crossings

@@ -83,6 +83,45 @@ def spec_placement(spec: PatternSpec, to_world: np.ndarray | None = None) -> Pla
     return place
 
 
+SLIVER = 0.002  # m: a panel this narrow on average (area / length) is no cloth at all ...
+
+
+def _slivers(spec: PatternSpec, names: list[str], h: float) -> tuple[set[str], list[str]]:
+    """Panels too small to mesh at h that are slivers (GarmentCode draws a flounce of zero length
+    as a strip 0.2 mm wide), left out with their seams where that splits no piece of the garment
+    in two; (their names, a warning for each). Other panels too small to mesh stay (mesh_panel
+    refuses them)."""
+    scale, rel = spec.scale, spec.properties.curvature_coords == "relative"
+    panels = spec.pattern.panels
+    thin: dict[str, tuple[float, float]] = {}
+    for n in names:
+        ring = geo.outline(panels[n], scale, rel)
+        area = abs(geo.signed_area(ring))
+        span = float(np.ptp(ring, axis=0).max()) if len(ring) else 0.0
+        if area < h * h and span > 0.0 and area / span < SLIVER:
+            thin[n] = (area / span, span)
+    if not thin:
+        return set(), []
+
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    def pieces(keep: list[str]) -> np.ndarray:  # each panel's piece (panels joined by stitches)
+        k = {n: i for i, n in enumerate(keep)}
+        e = [(k[st.a.panel], k[st.b.panel]) for st in spec.pattern.stitches if st.a.panel in k and st.b.panel in k]
+        e = np.array(e, dtype=np.int64).reshape(-1, 2)
+        return connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(keep),) * 2),
+                                    directed=False)[1]
+
+    rest = [n for n in names if n not in thin]
+    whole = dict(zip(names, pieces(names)))
+    if not rest or len(set(pieces(rest))) != len({whole[n] for n in rest}):
+        return set(), []  # (a sliver joining two parts: mesh_panel's refusal names it)
+    notes = [f"warning: panel '{n}' is {1000 * width:.1f} mm wide and {100 * span:.0f} cm long: no cloth at all "
+             "(a part drawn with no length), left out with its seams" for n, (width, span) in thin.items()]
+    return set(thin), notes
+
+
 def build_garment(spec: PatternSpec, h: float = 0.015, place: Placement | None = None,
                   source: str = "pattern") -> Garment:
     """Mesh and place every panel; h is the target cloth edge length in metres."""
@@ -95,12 +134,15 @@ def build_garment(spec: PatternSpec, h: float = 0.015, place: Placement | None =
     names += [n for n in panels if n not in names]
     names = [n for n in names if n in panels]
     place = place or spec_placement(spec)
+    thin, thin_notes = _slivers(spec, names, h)
+    names = [n for n in names if n not in thin]
+    stitches = [st for st in spec.pattern.stitches if st.a.panel not in thin and st.b.panel not in thin]
 
     # segments per edge: from its length, the same on both sides of a stitch
     nseg = {(n, i): max(1, math.ceil(geo.edge_length(panels[n], e, scale, rel) / h))
             for n in names for i, e in enumerate(panels[n].edges)}
     for _ in range(3):  # edges sewn more than once: propagate the max to a fixed point
-        for a, b in spec.pattern.stitches:
+        for a, b in stitches:
             k = max(nseg[(a.panel, a.edge)], nseg[(b.panel, b.edge)])
             nseg[(a.panel, a.edge)] = nseg[(b.panel, b.edge)] = k
 
@@ -126,7 +168,7 @@ def build_garment(spec: PatternSpec, h: float = 0.015, place: Placement | None =
 
     seams, seam_id, stitch_names = [], [], []
     placed = spec.tryon is not None and spec.tryon.pairing == "placed"
-    for s, st in enumerate(spec.pattern.stitches):
+    for s, st in enumerate(stitches):
         a, b = st
         va = meshes[a.panel].edge_vertices[a.edge] + offset[a.panel]
         vb = meshes[b.panel].edge_vertices[b.edge] + offset[b.panel]
@@ -154,6 +196,6 @@ def build_garment(spec: PatternSpec, h: float = 0.015, place: Placement | None =
                    lattice=np.concatenate(lat), quads=np.concatenate(quads).astype(np.int32),
                    tris=np.concatenate(tris).astype(np.int32), seams=seams_arr, seam_id=seam_id_arr,
                    panel_names=names, stitch_names=stitch_names,
-                   warnings=[str(p) for p in problems],
+                   warnings=[str(p) for p in problems] + thin_notes,
                    labelled={k: np.unique(np.concatenate(v)) for k, v in labelled.items()},
                    pinched=[n for n in names if meshes[n].pinched])
