@@ -34,6 +34,9 @@ class StepConfig:
     self_collision: bool = False  # cloth-cloth contact within the cloth (engine.cloth.selfcontact)
     self_thickness: float = 0.003  # m: ... kept between two layers
     self_every: int = 2  # ... checked every this many steps
+    # open seam pairs pulled again after the collision response: it sets a vertex in contact to
+    # the mean of its faces' responses, which took the pull off seam ends lying on the body
+    sew_after_contact: bool = True
 
     def __post_init__(self):
         if self.velocity_mode not in VM_MODES:

@@ -63,6 +63,14 @@ def sew(model: ClothModel, state: ClothState, buf: StepBuffers, sewing: Sewing, 
                           float(np.exp(-sewing.panel_damping * dt)))
 
 
+def pull(model: ClothModel, state: ClothState, buf: StepBuffers, sewing: Sewing) -> None:
+    """The open seam pairs pulled shut again (never into the body), alone (sew's panel damping
+    is not repeated)."""
+    meet, meet_on = sewing.meeting()
+    pull_seams(state.x, state.v, model.mass, sewing.pairs, sewing.welded, sewing.tau, sewing.vmax, buf.contact,
+               buf.contact_n, meet, meet_on)
+
+
 def attach(state: ClothState, attachment: Attachment) -> None:
     """The attached vertices brought to their planes (the velocity along each plane kept)."""
     a = attachment

@@ -139,6 +139,10 @@ class ClothSolver:
             passes.collision_points(state, buf, dt * ahead, buf.points)
             self.last_hits = passes.respond(m, state, buf, cfg, self.answers.answer(buf.points), forcing, dt,
                                             recover, n_act)
+            if sewing is not None and cfg.sew_after_contact:
+                # (the response sets a point in contact to its faces' mean: a seam end lying on
+                # the body lost its pull to its neighbours'; the pull keeps off the body's normal)
+                passes.pull(m, state, buf, sewing)
         t2 = time.perf_counter()
         # positions (eq. 3); then Provot's position modification (the comparison mode), or the
         # strain guard: what the velocity modification could not hold (the body pushing a band out)
