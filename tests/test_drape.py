@@ -433,7 +433,10 @@ def test_sewing_gives_up_when_the_seams_stop_closing():
     snap_stall after snap_after (2 s of simulated time; measured: 2.4 s), not at the end of the
     4 s budget, and says how far they stayed open and that the garment may be too small. (On
     default:male itself its seams stalled with 4 contact rounds a step; with 2 they close,
-    stretched 41 %, and the drape refuses it: test_a_drape_that_stays_stretched_is_refused_early.)"""
+    stretched 41 %, and the drape refuses it: test_a_drape_that_stays_stretched_is_refused_early.)
+    Sewn as by default -- the pull taken again after the collision response (StepConfig.
+    sew_after_contact) -- its seams close on the body, stretched, and the drape refuses it as too
+    small; the stall is tested without that."""
     from engine.body.default import default_body
     from engine.errors import SimulationError
     from engine.scene.garments import resolve_garment
@@ -442,11 +445,15 @@ def test_sewing_gives_up_when_the_seams_stop_closing():
     body = default_body("male", weight=1.0)
     spec, place, name = resolve_garment("skirt", body, "XS")
     side = r"front\[\d\]-back\[\d\] \(\d+.\d cm\)"  # the seams still open, the widest first
+    t = Tuning()
+    t = replace(t, drape=replace(t.drape, step=replace(t.drape.step, sew_after_contact=False)))
     with pytest.raises(SimulationError, match=r"^sewing stopped closing after [23].\d s of simulated time \(the widest "
                                               r"gap stayed \d+.\d-\d+.\d cm for 0.5 s\); open seams: "
                                               + side + "(, " + side + r")*\. The garment may be too small") as e:
-        run_tryon(body, spec, TryOnOptions(resolution_cm=3.0), place=place, source=name)
+        run_tryon(body, spec, TryOnOptions(resolution_cm=3.0), t, place=place, source=name)
     assert e.value.too_small and e.value.positions.shape[1] == 3
+    with pytest.raises(SimulationError, match=r"^the garment is too small for this body: for [\d.]+ s of draping"):
+        run_tryon(body, spec, TryOnOptions(resolution_cm=3.0), place=place, source=name)
 
 
 def test_a_drape_that_stays_stretched_is_refused_early():
@@ -962,6 +969,41 @@ def test_a_ring_tier_laid_out_tall_hangs_its_width_and_is_not_bunched_up():
     assert length == pytest.approx(0.17, abs=0.01) and ratio > 0.9, (name, length, ratio)
 
 
+def test_a_collar_sewn_down_a_v_neckline_hangs_from_that_seam():
+    """A collar sewn only along a V neckline (its one seam drops 20 cm over its 34 cm: it runs
+    down, not across) lies on the chest 20 cm tall: it hangs from its whole seam, its 10 cm
+    width -- not from its top point 34 cm away (GarmentCode's mean_female 13_025 was called
+    bunched up, 20 cm tall of a 34 cm length). Crumpled onto its seam, 2 cm wide, it is bunched."""
+    from types import SimpleNamespace
+
+    from engine.scene.tryon import BUNCHED, shortest_panel
+
+    u, w = np.meshgrid(np.linspace(0.0, 0.34, 18), np.linspace(0.0, 0.10, 6), indexing="ij")
+    uv = np.column_stack([u.ravel(), w.ravel()])
+    seam = np.flatnonzero(np.isclose(uv[:, 1], 0.0))
+    n, m = len(uv), len(seam)
+    neck = np.column_stack([uv[seam, 0], np.zeros(m)])  # the bodice's neckline edge
+    placed = np.column_stack([0.3 + uv[:, 1], 1.0 + uv[:, 0], np.full(n, 0.2)])  # laid upright, 34 cm tall
+    placed = np.concatenate([placed, np.column_stack([np.full(m, 0.3), 1.0 + neck[:, 0], np.full(m, 0.2)])])
+    garment = SimpleNamespace(positions=placed, uv=np.concatenate([uv, neck]), panel=np.repeat([0, 1], [n, m]),
+                              panel_names=["collar", "neck"], seams=np.column_stack([seam, n + np.arange(m)]),
+                              seam_id=np.zeros(m, int))
+
+    def worn(width):  # down the V: 20 cm in 34 cm, the collar lying out to the side over the chest
+        y = 1.45 - 0.2 * uv[:, 0] / 0.34 - 0.3 * uv[:, 1] * width / 0.10
+        x = 0.05 + 0.16 * uv[:, 0] / 0.34 + uv[:, 1] * width / 0.10
+        col = np.column_stack([x, y, np.full(n, 0.15)])
+        return np.concatenate([col, col[seam]])
+
+    vmap = np.arange(len(placed))
+    ratio, name, draped, length = shortest_panel(garment, SimpleNamespace(positions=worn(0.10), vertex_map=vmap))
+    assert name == "collar" and length == pytest.approx(0.10, abs=0.01) and ratio > 1.0
+    crumpled = worn(0.10)
+    crumpled[:n, 1] = 1.45  # the whole collar heaped level at the top of the V
+    crumpled[:n, 1] -= 0.02 * uv[:, 1] / 0.10
+    assert shortest_panel(garment, SimpleNamespace(positions=crumpled, vertex_map=vmap))[0] < BUNCHED
+
+
 def test_a_knit_is_guarded_closer_to_its_threshold_than_cotton():
     """The strain guard holds a knit (jersey: allowed 15 %) 0.3 % past its threshold and cotton
     0.5 %: the softer cloth overshoots the guard more between its passes, and at 0.5 % jersey
@@ -1079,7 +1121,8 @@ def test_a_top_whose_straps_did_not_hold_fell_off_the_shoulders():
     ended at 1.12 m -- the straps let go and the rest bunched round the hips, its median vertex
     risen, so it neither slid nor bunched by those tests (GarmentCode's 37_025) -- fell off
     them, said first; a hood that falls back to 1.40 m did not; nor a strapless top placed
-    under the shoulders (top 1.25 m) that ends at 1.12 m."""
+    under the shoulders (top 1.25 m) that ends at 1.12 m; nor a skirt whose flat layout rises
+    above the shoulders far to the side."""
     from engine.scene.tryon import fell_off, hang_warnings
 
     placed = np.array([[0.0, 0.77, 0.0], [0.0, 1.39, 0.0]])
@@ -1092,6 +1135,10 @@ def test_a_top_whose_straps_did_not_hold_fell_off_the_shoulders():
     strapless = np.array([[0.0, 0.77, 0.0], [0.0, 1.25, 0.0]])
     assert fell_off(strapless, strapless - [0, 0.13, 0], 1.37) is None
     assert fell_off(placed, placed - [0, 0.27, 0], float("nan")) is None
+    # a ruffled skirt laid flat in a ring: its tiers rise above the shoulders 1.3-2.2 m to the
+    # side (GarmentCode's mean_female 43_019); worn at the waist, it did not fall off anything
+    ring = np.array([[0.0, 1.05, 0.15], [1.29, 1.45, 0.15], [-2.2, 1.64, -0.15]])
+    assert fell_off(ring, np.array([[0.0, 1.04, 0.1], [0.3, 0.6, 0.2], [-0.3, 0.6, -0.2]]), 1.37) is None
 
 
 @pytest.mark.parametrize("bad", [dict(finish_pen=0.0), dict(finish_pen=0.5), dict(finish_budget=0.0),
@@ -1104,3 +1151,28 @@ def test_the_exact_finish_refuses_absurd_settings(bad):
     with pytest.raises(InputError, match=next(iter(bad))):
         DrapeTuning(**bad).validate()
     DrapeTuning(finish_pen=None).validate()
+
+
+def test_seams_open_over_the_hands_are_said_to_be_there():
+    """Sewing that stalled with its open seams past the wrists, over the hands (GarmentCode's
+    sleeves run past the wrist, their ends narrower than the hand), says so and what would close
+    them, in place of the generic advice; open seams at the waist get no such words."""
+    from engine.body import resolve_body
+    from engine.body.measure import measure
+    from engine.errors import SimulationError
+    from engine.scene.drape import OPEN_WHY
+    from engine.scene.tryon import _hand_hint
+
+    body = resolve_body("default:female")
+    y0 = float(body.vertices[:, 1].min())
+    a, w = measure(body).arm_lines[0]
+    past = np.array([a + t * (w - a) for t in (1.0, 1.05, 1.1)]) + [0.0, y0, 0.0]
+    err = SimulationError(f"sewing stopped closing; open seams: sleeve (3.6 cm). {OPEN_WHY}")
+    err.open_points = past
+    _hand_hint(err, body)
+    assert "over the hands (3 of 3 open pairs)" in str(err) and "shorter sleeves" in str(err)
+    assert OPEN_WHY not in str(err) and str(err).startswith("sewing stopped closing")
+    waist = SimulationError(f"sewing stopped closing. {OPEN_WHY}")
+    waist.open_points = np.array([[0.0, y0 + 1.0, 0.12], [0.1, y0 + 1.0, 0.1]])
+    _hand_hint(waist, body)
+    assert str(waist).endswith(OPEN_WHY)

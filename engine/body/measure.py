@@ -207,6 +207,9 @@ class Measurements:
     # arm's girth; how thick the arm is where an armhole goes round it
     hand_gap: float = float("nan")  # the smallest gap between an arm hanging below the waist and
     # the torso or legs beside it (0 where they touch or overlap; NaN: no arm reaches there)
+    # each measured arm's (acromion, wrist) points (3,) m, y from the floor: the hand lies past
+    # the wrist along that line (a sleeve longer than the arm ends over it)
+    arm_lines: list = field(default_factory=list, compare=False, repr=False)
     notes: list[str] = field(default_factory=list)
     estimated: list[str] = field(default_factory=list)  # landmarks not found, estimated from the stature
 
@@ -652,6 +655,7 @@ def _arms(v: np.ndarray, f: np.ndarray, prof: _Profile, armpit: float, acromion,
         dist = np.linalg.norm(cents[:iw + 1] - (a + t[:, None] * aw), axis=1)
         elbow = cents[int(np.argmax(dist))]
         lengths.append(np.linalg.norm(elbow - a) + np.linalg.norm(wrist - elbow))
+        m.arm_lines.append((np.asarray(a, dtype=np.float64).copy(), np.asarray(wrist, dtype=np.float64).copy()))
     if lengths:
         m.arm_length = float(np.mean(lengths))
     else:

@@ -511,6 +511,9 @@ def _stalled(out: _Pull, stall: deque, it: int, dt: float, t, lone: bool = False
     return False
 
 
+OPEN_WHY = "The garment may be too small for this body (try a larger size) or the panels start too far apart"
+
+
 def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pull, pulls: list) -> SimulationError:
     """The error of seams that stayed open: which, how wide, after how long."""
     t, garment, welded, gaps = job.tuning.sew, job.garment, pull.welded, pull.gaps
@@ -526,11 +529,13 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
     small = _too_small_panels(job, model, state, welded)
     crotch = _crotch_short(job, state, welded)
     why = (crotch if crotch else f"{small[0]}: that part is too small for this body (try a larger size)" if small else
-           "The garment may be too small for this body (try a larger size) or the panels start too far apart")
+           OPEN_WHY)
     err = SimulationError(f"sewing {when}{again}; open seams: {names}. {why}")
     if small and not crotch:  # (a fit, not the sewing: engine.scene.tryon drapes it in a stretchier knit)
         err.small_part, err.tight_panels = small[1], small[2]
     err.positions, err.triangles = state.x.copy(), _triangles(model)  # for a picture
+    op = garment.seams[~welded]
+    err.open_points = 0.5 * (state.x[op[:, 0]] + state.x[op[:, 1]])  # (where they lie: tryon's hints)
     err.too_small = True  # (engine.scene.garments.add_size_hint)
     # where the open seams were placed (engine.scene.garments.arms_in_the_way)
     err.open_top = float(garment.positions[garment.seams[~welded].ravel(), 1].max())

@@ -91,7 +91,8 @@ def fell_off(placed: np.ndarray, draped: np.ndarray, shoulder_y: float) -> float
     more than FELL; else None. (A hood or a collar that folds back still rests on the shoulders;
     straps that did not hold let the whole top down: GarmentCode's necklines cut past the
     armholes.)"""
-    if not np.isfinite(shoulder_y) or placed[:, 1].max() < shoulder_y - OVER_SHOULDERS:
+    near = np.hypot(placed[:, 0], placed[:, 2]) < OVER_AXIS
+    if not np.isfinite(shoulder_y) or not near.any() or placed[near, 1].max() < shoulder_y - OVER_SHOULDERS:
         return None
     below = shoulder_y - float(draped[:, 1].max())
     return below if below > FELL else None
@@ -350,6 +351,7 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
                             floor=floor, panel_fabrics=panel_fabrics)
     except SimulationError as e:
         _carried_hint(e, placement_note, body)
+        _hand_hint(e, body)
         raise
     finally:
         collider.release()  # (the map collider's query helper thread)
@@ -458,7 +460,11 @@ def _body_collider(body: Body, plan: TryOnPlan, request: TryOnOptions, tolerance
 
 
 EXEMPT_BELOW = 0.10  # m: a panel this far under the armpits (all of it) is a lower garment's ...
-EXEMPT_AXIS = 0.4  # m: ... all of it that lies this near the body's vertical axis
+EXEMPT_AXIS = 0.4  # m: ... all of it that lies this near the body's vertical axis ...
+# ... but for its highest tenth there: a circle skirt's half laid flat before the body is a ring
+# whose ends rise to the chest beside the waist (mean_female 61_009's skirt, mid-height 0.79 m,
+# rose to 1.37 m: its side seams caught on the arms)
+EXEMPT_TOP = 90
 
 
 def _arms_passed(body: Body, garment, plan: TryOnPlan, request: TryOnOptions, tolerance: float):
@@ -484,7 +490,8 @@ def _arms_passed(body: Body, garment, plan: TryOnPlan, request: TryOnOptions, to
     x = garment.positions
     near = np.hypot(x[:, 0], x[:, 2]) < EXEMPT_AXIS
     top = np.full(n, -np.inf)
-    np.maximum.at(top, garment.panel[near], x[near, 1])
+    for i in np.unique(garment.panel[near]):
+        top[i] = np.percentile(x[near & (garment.panel == i), 1], EXEMPT_TOP)
     mid = np.bincount(garment.panel, weights=x[:, 1], minlength=n) / np.maximum(np.bincount(garment.panel, minlength=n), 1)
     below = (top < armpit - EXEMPT_BELOW) & (mid < armpit - EXEMPT_BELOW)
     if not below.any():
@@ -586,6 +593,39 @@ def _carried_hint(err: Exception, placement_note: str | None, body: Body, slid: 
 
 OTHER_BODY = 0.08  # m: a girth this far from the mean body's: the pattern is for another body
 
+AT_WRIST = 0.97  # open seams this far along the arm from the acromion to the wrist, or past it ...
+NEAR_ARM = 0.12  # m: ... within this of that line (produced past the wrist) lie at the hand
+
+
+def _hand_hint(err: Exception, body: Body) -> None:
+    """Seams that stayed open at the wrists or past them, over the hands (GarmentCode's sleeves run
+    past the wrist, their end narrower than the hand: f_smpl 67_013's 17 cm end 6-9 cm past
+    it): the error says so, and what would close them."""
+    from engine.body.measure import measure
+
+    pts = getattr(err, "open_points", None)
+    if pts is None or not len(pts):
+        return
+    try:
+        lines = measure(body).arm_lines
+    except TryonError:
+        return
+    p = pts - [0.0, float(body.vertices[:, 1].min()), 0.0]  # (measured from the floor)
+    at = np.zeros(len(p), dtype=bool)
+    for a, w in lines:
+        d = w - a
+        t = (p - a) @ d / max(float(d @ d), 1e-12)
+        off = np.linalg.norm(p - (a + t[:, None] * d), axis=1)
+        at |= (t >= AT_WRIST) & (off < NEAR_ARM)
+    if at.mean() < 0.5:
+        return
+    from engine.scene.drape import OPEN_WHY
+
+    said = str(err).removesuffix(OPEN_WHY).rstrip()
+    err.args = (f"{said} They lie at the wrists or past them, over the hands ({at.sum()} of {len(p)} open "
+                "pairs): a sleeve or cuff that reaches the hand, narrower than the hand, cannot close round it "
+                "-- shorter sleeves, or wider sleeve ends, would",) + tuple(err.args[1:])
+
 
 # x the fabric's friction while sewing on a body whose arms hang closer to its torso than
 # ARM_GAP_OK: without it the straps slide off the shoulders down the arm, which no longer falls
@@ -637,7 +677,9 @@ TOP_DROP = 0.10  # m: a garment whose top ends this far below where it was place
 # m: ... and this far, it came off it: an error, not a result (it may meet every other bar)
 SLID_OFF = 0.25
 FELL = 0.15  # m: a garment placed over the shoulders whose top ends this far below them fell off them
-OVER_SHOULDERS = 0.05  # m: (placed over them: its top at least this near their height)
+OVER_SHOULDERS = 0.05  # m: (placed over them: its top at least this near their height ...
+OVER_AXIS = 0.4  # m: ... this near the body's vertical axis: a wide skirt laid flat in a ring
+# rises above the shoulders 1.2-2.2 m to the side, and is worn at the waist)
 RODE_UP = 0.06  # m: a catalogue garment whose bulk rose this far and ended tight is too small (_rode_up)
 HEM_RISE = 0.15  # m: ... whose lowest point ends this far above its placed height bunched up ...
 PANEL_TALL = 0.15  # m: ... where a panel placed at least this tall ...
@@ -705,7 +747,8 @@ def shortest_panel(garment: Garment, res: DrapeResult,
     lesser of its placed height and how far its flat cloth reaches from where it hangs: the seams
     across it that end highest (within HUNG_FROM of the highest: a tier's to the tier above, a
     peplum's to the bodice's pieces, a bodice's shoulder seam; a seam dropping more than half its
-    length runs down the side; a panel sewn across nowhere hangs from its top HUNG_FROM). A ring
+    length runs down the side; a panel sewn only along such seams -- a collar on a V neckline --
+    hangs from all of them; a panel sewn nowhere hangs from its top HUNG_FROM). A ring
     sector (a circle peplum, a ruffle tier) laid out flat 95 cm tall hangs its ring's width, 17 cm.
     placed: the garment's positions to measure from (default garment.positions)."""
     from scipy.spatial import cKDTree
@@ -737,8 +780,11 @@ def shortest_panel(garment: Garment, res: DrapeResult,
         longest = max((n for _, _, n in across), default=0.0)
         across = [(h, v) for h, v, n in across if n >= ACROSS_SHARE * longest]
         top = max((h for h, _ in across), default=None)
-        hung = np.concatenate([v for h, v in across if h >= top - HUNG_FROM]) if across else None
-        if hung is None:
+        if across:
+            hung = np.concatenate([v for h, v in across if h >= top - HUNG_FROM])
+        elif mine.any():  # sewn only along seams running down (a collar on a V neckline): from all of them
+            hung = np.unique(seams[mine])
+        else:
             hung = np.flatnonzero(on & (y1 >= y1[on].max() - min(HUNG_FROM, 0.2 * draped)))
         reach = float(cKDTree(garment.uv[hung]).query(garment.uv[on])[0].max())
         length = min(placed, reach)
