@@ -1176,3 +1176,22 @@ def test_seams_open_over_the_hands_are_said_to_be_there():
     waist.open_points = np.array([[0.0, y0 + 1.0, 0.12], [0.1, y0 + 1.0, 0.1]])
     _hand_hint(waist, body)
     assert str(waist).endswith(OPEN_WHY)
+
+
+def test_cloth_that_flies_off_says_what_may_have_caused_it():
+    """Cloth that flew off or became non-finite is refused with what most likely did it at the
+    default step (sewn shut tangled round the body) and what may hold it (--dt)."""
+    from engine.cloth.model import ClothState
+    from engine.errors import SimulationError
+    from engine.scene.drape import _check_finite
+
+    x = np.zeros((4, 3))
+    _check_finite(ClothState(x.copy(), np.zeros_like(x)), "draping")  # (at rest: nothing said)
+    far = x.copy()
+    far[2] = [0.0, 1.0, 250.0]
+    with pytest.raises(SimulationError, match=r"flew off while draping .*tangled round the body.*--dt"):
+        _check_finite(ClothState(far, np.zeros_like(x)), "draping")
+    bad = x.copy()
+    bad[1, 0] = np.nan
+    with pytest.raises(SimulationError, match=r"unstable while sewing .*tangled round the body.*softer fabric"):
+        _check_finite(ClothState(bad, np.zeros_like(x)), "sewing")

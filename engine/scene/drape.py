@@ -879,13 +879,16 @@ def _rms_move(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def _check_finite(state: ClothState, stage: str, floor: float | None = None) -> None:
+    # (at the default step, which is the stability bound, the usual cause is cloth sewn shut
+    # tangled round the body: GarmentCode's mean_female 11_019, a hooded top, over one shoulder)
+    why = ("the garment may have been sewn shut tangled round the body (look at the sewing in the live "
+           "view); a smaller time step (--dt) may hold it")
     if not (np.all(np.isfinite(state.x)) and np.all(np.isfinite(state.v))):
-        raise SimulationError(f"the cloth became unstable while {stage} (non-finite positions); "
-                              "use a smaller time step or a softer fabric")
+        raise SimulationError(f"the cloth became unstable while {stage} (non-finite positions): {why}, "
+                              "or a softer fabric")
     if state.x[:, 1].max() < (FELL_BELOW if floor is None else floor + FELL_ON_FLOOR):
         raise SimulationError(f"the garment fell off the body while {stage} (all of it below the feet): it is far "
                               "too large for this body, or its pattern places it away from the body; try a "
                               "smaller size, or check the panels' translation")
     if np.abs(state.x).max() > 100.0:
-        raise SimulationError(f"the cloth flew off while {stage} (a vertex is more than 100 m away); "
-                              "use a smaller time step")
+        raise SimulationError(f"the cloth flew off while {stage} (a vertex is more than 100 m away): {why}")
