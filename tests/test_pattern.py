@@ -307,6 +307,13 @@ def test_a_sliver_hanging_from_one_part_is_left_out_with_a_warning():
     assert len(g.seams) > 0 and set(np.unique(g.seam_id)) == {0}
     note = [w for w in g.warnings if "frill" in w]
     assert len(note) == 1 and "0.2 mm wide" in note[0] and "left out" in note[0]
+    # a bow tie's halves cancel in its signed area: it is no sliver, and meshes whole
+    tie = _square_panel(20.0)
+    tie["vertices"] = [[0, 0], [20, 0], [0, 20], [20, 20]]
+    d["pattern"]["panels"]["frill"] = tie
+    d["pattern"]["stitches"][0][1]["edge"] = 0
+    g = build_garment(_spec(d), h=0.015)
+    assert g.panel_names == ["leg", "frill"] and not [w for w in g.warnings if "left out" in w]
 
 
 def test_a_sliver_joining_two_parts_is_refused():

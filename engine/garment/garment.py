@@ -98,7 +98,8 @@ def _slivers(spec: PatternSpec, names: list[str], h: float) -> tuple[set[str], l
         ring = geo.outline(panels[n], scale, rel)
         area = abs(geo.signed_area(ring))
         span = float(np.ptp(ring, axis=0).max()) if len(ring) else 0.0
-        if area < h * h and span > 0.0 and area / span < SLIVER:
+        # (an outline crossing itself may cancel its own area: a bow tie is not a sliver)
+        if area < h * h and span > 0.0 and area / span < SLIVER and not len(geo.segment_crossings(ring)[0]):
             thin[n] = (area / span, span)
     if not thin:
         return set(), []
