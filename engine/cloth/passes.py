@@ -55,17 +55,15 @@ def modify_velocities(model: ClothModel, state: ClothState, buf: StepBuffers, co
 def sew(model: ClothModel, state: ClothState, buf: StepBuffers, sewing: Sewing, dt: float) -> None:
     """The open seam pairs pulled shut (never into the body); a flat layout's panels then damped
     toward their own mean motion (Sewing.panel_damping)."""
-    meet, meet_on = sewing.meeting()
-    pull_seams(state.x, state.v, model.mass, sewing.pairs, sewing.welded, sewing.tau, sewing.vmax, buf.contact,
-               buf.contact_n, meet, meet_on)
+    pull(model, state, buf, sewing)
     if sewing.panel is not None and sewing.panel_damping > 0.0:
         damp_about_panels(state.v, model.mass, sewing.panel, int(sewing.panel.max()) + 1,
                           float(np.exp(-sewing.panel_damping * dt)))
 
 
 def pull(model: ClothModel, state: ClothState, buf: StepBuffers, sewing: Sewing) -> None:
-    """The open seam pairs pulled shut again (never into the body), alone (sew's panel damping
-    is not repeated)."""
+    """The open seam pairs pulled shut (never into the body): sew's first part, and alone again
+    after the collision response (StepConfig.sew_after_contact)."""
     meet, meet_on = sewing.meeting()
     pull_seams(state.x, state.v, model.mass, sewing.pairs, sewing.welded, sewing.tau, sewing.vmax, buf.contact,
                buf.contact_n, meet, meet_on)

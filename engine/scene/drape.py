@@ -878,11 +878,14 @@ def _rms_move(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))))
 
 
+# (at the default step, which is the stability bound, the usual cause is cloth sewn shut tangled
+# round the body: GarmentCode's mean_female 11_019, a hooded top, over one shoulder)
+UNSTABLE_WHY = ("the garment may have been sewn shut tangled round the body (look at the sewing in the live "
+                "view); a smaller time step (--dt) may hold it")
+
+
 def _check_finite(state: ClothState, stage: str, floor: float | None = None) -> None:
-    # (at the default step, which is the stability bound, the usual cause is cloth sewn shut
-    # tangled round the body: GarmentCode's mean_female 11_019, a hooded top, over one shoulder)
-    why = ("the garment may have been sewn shut tangled round the body (look at the sewing in the live "
-           "view); a smaller time step (--dt) may hold it")
+    why = UNSTABLE_WHY
     if not (np.all(np.isfinite(state.x)) and np.all(np.isfinite(state.v))):
         raise SimulationError(f"the cloth became unstable while {stage} (non-finite positions): {why}, "
                               "or a softer fabric")
