@@ -91,7 +91,11 @@ def drape_one(path: Path, body, request) -> dict:
     row.update(ok=bad is None, wall=time.perf_counter() - t, reason=bad, vertices=rep["cloth_vertices"],
                pen_max=rep["penetration_mm"]["max"], pen_p99=rep["penetration_mm"]["p99"],
                strain=rep["strain"]["max"], threshold=rep["strain"]["threshold"], folds=rep["sharp_folds"]["count"],
-               snapped=rep["seam_gap_mm"]["snapped"], warnings=rep["warnings"], picture=(res.positions, res.triangles))
+               snapped=rep["seam_gap_mm"]["snapped"], warnings=rep["warnings"], picture=(res.positions, res.triangles),
+               # (the drape that stands: its fabric, its parts in a knit, its own wall -- the rest of
+               # `wall` went on the fabric ladder's earlier drapes)
+               fabric=rep["fabric"], parts=sorted(rep.get("panel_fabrics", {})),
+               last_wall=rep["wall_seconds"]["total"])
     return row
 
 
@@ -143,7 +147,8 @@ def main() -> None:
         r = drape_one(p, body, request)
         rows.append(r)
         extra = (f"{r['vertices']} v, pen {r['pen_max']:.1f}/{r['pen_p99']:.1f} mm, strain {100 * r['strain']:.1f} %, "
-                 f"folds {r['folds']}" if "vertices" in r else r.get("error", "")[:160])
+                 f"folds {r['folds']}, {r['fabric']}{' + parts' if r['parts'] else ''}, "
+                 f"last drape {r['last_wall']:.1f} s" if "vertices" in r else r.get("error", "")[:160])
         print(f"{r['design']:32s} {'ok  ' if r['ok'] else 'FAIL'} {r['wall']:6.1f} s  {extra}"
               + ("" if r["ok"] or "vertices" not in r else f"  ({r['reason']})"), flush=True)
     ok = [r for r in rows if r["ok"]]

@@ -1,10 +1,11 @@
-"""Patterns that GarmentCode's own generator writes (issue 47), as it writes them: seventeen designs
+"""Patterns that GarmentCode's own generator writes (issue 47), as it writes them: eighteen designs
 drawn by ../shared/garmentcode/sample_designs.py on mean_female and f_smpl_average_A40 (kept in
 tests/garmentcode/designs/, MIT; its README says which seed drew each and what it covers: a waistband,
 a fitted dress, pants with cuffs, a gathered skirt, a collar with skirt levels, a hood, a wide skirt
 laid out over the hands, a top on narrow straps, sleeves with a fifteen-gore skirt, a strapless top,
 a sleeveless dress and a bodice cut with no ease, cuffs cut smaller than the arm, a jumpsuit whose
-crotch is too short, a top whose straps do not hold, a gown pooled on the floor). The default suite
+crotch is too short, a top whose straps do not hold, a gown pooled on the floor, a skirt and a
+flounce laid out in rings past the armpits). The default suite
 reads, checks and meshes them all and drapes several; the slow suite draws a fresh seeded sample and
 drapes it (scripts/bench_garmentcode.py's bars)."""
 

@@ -89,16 +89,38 @@ def _garment(name: str, body):
     return build_garment(spec, h=0.015, place=place, source=name)
 
 
-def _passed(name: str):
+def _passed(name: str, labels: bool = True):
+    """Which panels of design `name` pass through the arms (labels: the pattern's own panel
+    labels are read, as run_tryon reads them)."""
     from engine.body import resolve_body
+    from engine.pattern.io import load_pattern
     from engine.scene.request import TryOnOptions
-    from engine.scene.tryon import _arms_passed, plan_maps
+    from engine.scene.tryon import _arms_passed, lower_labelled, plan_maps
 
     body = resolve_body(str(SAMPLE_BODY))
     g = _garment(name, body)
-    pt = _arms_passed(body, g, plan_maps(body, g, 0.005, "image"), TryOnOptions(), 0.003)
-    assert pt is not None
+    lower = lower_labelled(load_pattern(DESIGNS / f"{name}_specification.json")) if labels else frozenset()
+    pt = _arms_passed(body, g, plan_maps(body, g, 0.005, "image"), TryOnOptions(), 0.003, lower=lower)
+    if pt is None:
+        assert not labels
+        return None, None, g
     return {n: bool(pt.vertices[g.panel == i].all()) for i, n in enumerate(g.panel_names)}, pt, g
+
+
+@pytest.mark.integration  # (renders the maps of the body without its arms)
+def test_a_skirt_labelled_a_lower_garment_s_passes_however_high_it_is_laid_out():
+    """GarmentCode's 83_010, a dress whose circle skirt and flounce it lays flat in rings reaching
+    past the armpits (the flounce up to the shoulders): the flounce's layout is no lower garment's,
+    and without the pattern's labels it met the arms and the side seams stayed 8-9 cm open on
+    them. Labelled a lower garment's ('leg'), they pass through; the bodice does not."""
+    from engine.body import resolve_body
+
+    passed, _, g = _passed("mean_female_83_010")
+    assert {n for n, p in passed.items() if p} == {"skirt_front", "skirt_back", "skirt_front_0", "skirt_back_0"}
+    flounce = g.positions[g.panel == g.panel_names.index("skirt_front_0")]
+    assert flounce[:, 1].max() > _armpit(resolve_body(str(SAMPLE_BODY)))
+    unlabelled, _, _ = _passed("mean_female_83_010", labels=False)
+    assert not unlabelled["skirt_front_0"] and not unlabelled["skirt_back_0"]  # (the flounce: its ring's top)
 
 
 @pytest.mark.integration  # (renders the maps of the body without its arms)

@@ -342,7 +342,8 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     held, held_note = attachment(garment, body)
     # (a pattern file's own layout: GarmentCode's reaches its body's hands; the catalogue's and a
     # DXF's placements start clear of the arms)
-    passing = _arms_passed(body, garment, plan, request, tuning.cloth.tolerance) if pattern_file else None
+    passing = _arms_passed(body, garment, plan, request, tuning.cloth.tolerance,
+                           lower=lower_labelled(spec)) if pattern_file else None
     if passing is not None:
         map_info["passed_through"] = passing.why
     try:
@@ -465,13 +466,24 @@ EXEMPT_AXIS = 0.4  # m: ... all of it that lies this near the body's vertical ax
 # whose ends rise to the chest beside the waist (mean_female 61_009's skirt, mid-height 0.79 m,
 # rose to 1.37 m: its side seams caught on the arms)
 EXEMPT_TOP = 90
+LOWER_LABEL = "leg"  # GarmentCode's segmentation label of a lower garment's panels (its meta_garment)
 
 
-def _arms_passed(body: Body, garment, plan: TryOnPlan, request: TryOnOptions, tolerance: float):
+def lower_labelled(spec: PatternSpec) -> frozenset[str]:
+    """The panels a pattern labels a lower garment's (LOWER_LABEL): GarmentCode labels a skirt's or
+    trousers' panels so, however it lays them out -- a circle skirt or a flounce laid flat in a
+    ring reaches up past the arms, far above the waist it hangs from."""
+    return frozenset(n for n, p in spec.pattern.panels.items() if p.label == LOWER_LABEL)
+
+
+def _arms_passed(body: Body, garment, plan: TryOnPlan, request: TryOnOptions, tolerance: float,
+                 lower: frozenset[str] = frozenset()):
     """The PassThrough (engine.collide.collider) of a garment with panels that hang wholly below
     the arms (skirts, trousers, a dress's skirt), or None: their cloth passes through the arms
     that hang beside them while the seams close and until the drape first settles, as in
-    GarmentCode's own simulator (engine.body.hanging); then it meets the whole body."""
+    GarmentCode's own simulator (engine.body.hanging); then it meets the whole body.
+    lower: panels the pattern labels a lower garment's (lower_labelled): below the arms
+    wherever their layout's top lies, if their middle is."""
     if request.collision != "image" or (plan.segments is not None and not any("arm" in s for s in plan.segments)):
         return None
     from engine.body.hanging import hanging_arms
@@ -493,7 +505,8 @@ def _arms_passed(body: Body, garment, plan: TryOnPlan, request: TryOnOptions, to
     for i in np.unique(garment.panel[near]):
         top[i] = np.percentile(x[near & (garment.panel == i), 1], EXEMPT_TOP)
     mid = np.bincount(garment.panel, weights=x[:, 1], minlength=n) / np.maximum(np.bincount(garment.panel, minlength=n), 1)
-    below = (top < armpit - EXEMPT_BELOW) & (mid < armpit - EXEMPT_BELOW)
+    labelled = np.isin(garment.panel_names, list(lower))
+    below = ((top < armpit - EXEMPT_BELOW) | labelled) & (mid < armpit - EXEMPT_BELOW)
     if not below.any():
         return None
     from scipy.sparse import coo_matrix
