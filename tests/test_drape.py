@@ -67,7 +67,8 @@ def test_drape_command_writes_everything(tmp_path):
 
 def test_a_garment_that_slid_down_or_bunched_up_is_flagged():
     """The report says when a drape did not end hanging where it was placed."""
-    from engine.scene.tryon import hang_shift, hang_warnings
+    from engine.scene.tryon import SLID_OFF, hang_shift, hang_warnings
+    from engine.scene.tryon import slid as slid_off
 
     rng = np.random.default_rng(0)
     placed = rng.uniform([-0.2, 0.5, -0.15], [0.2, 1.4, 0.15], (500, 3))  # a dress, shoulders to knees
@@ -93,6 +94,17 @@ def test_a_garment_that_slid_down_or_bunched_up_is_flagged():
     folded = hang_shift(placed_c, worn, ident)
     assert folded["top"] < -0.10 and folded["bulk"] > 0.05
     assert hang_warnings(folded) == []
+    # a dress whose skirt was laid out in a ring reaching above the bodice (GarmentCode's circle
+    # skirts: f_smpl 97_006's, to 1.85 m) falls to the hips: judged by its bodice, it did not slide
+    ring = placed.copy()
+    ring[:, 1] += 0.6  # (the skirt's ring, up to 2.0 m)
+    both = np.vstack([placed, ring])
+    dropped = np.vstack([shifted(0.47, 1.42), shifted(0.2, 1.0)])  # the bodice hangs, the skirt fell
+    every = np.arange(len(both))
+    assert slid_off(hang_shift(both, dropped, every), SLID_OFF)  # (the whole garment's top and bulk fell)
+    bodice = np.arange(len(both)) < len(placed)
+    judged = hang_shift(both, dropped, every, bodice)
+    assert not slid_off(judged, SLID_OFF) and judged["hem"] == pytest.approx(0.2 - 0.5)  # (the hem: all of it)
 
 
 def test_fit_warnings_say_tight_or_unsettled():

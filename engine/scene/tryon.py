@@ -370,9 +370,15 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     # on the floor, neither risen nor bunched)
     placed = garment.positions.copy()
     placed[:, 1] = np.maximum(placed[:, 1], floor)
-    shift = hang_shift(placed, res.positions, res.vertex_map)
+    # (a lower garment's panels laid out in rings above the waist -- over the head -- fall by
+    # design: where the pattern has others, those say whether it slid or fell off the shoulders)
+    judged = ~np.isin(garment.panel_names, list(lower_labelled(spec)))[garment.panel] if pattern_file else None
+    shift = hang_shift(placed, res.positions, res.vertex_map, judged)
     shrunk = shortest_panel(garment, res, placed)
-    fell = fell_off(garment.positions, res.positions, _world_height(body, "shoulder_height"))
+    vm = res.vertex_map
+    part = judged is not None and judged.any() and vm is not None and len(vm) == len(judged)
+    fell = fell_off(garment.positions[judged] if part else garment.positions,
+                    res.positions[vm[judged]] if part else res.positions, _world_height(body, "shoulder_height"))
     if slid(shift, SLID_OFF):  # settled, but not on the body: never written as a result
         raise _slid(body, res, shift, placement_note, crossing_hint(garment))
     if not pattern_file and rode_up(shift, res.strain_max, fab):  # (a pattern file's layout may rise into place)
@@ -528,6 +534,19 @@ def _arms_passed(body: Body, garment, plan: TryOnPlan, request: TryOnOptions, to
     from engine.collide.collider import PassThrough
     from engine.collide.maps import render_body_maps
 
+    # that cloth passes through the body above where a lower garment is worn too: a circle skirt
+    # laid flat in a ring reaches over the chest and head, and its side seams close through them
+    # (f_smpl 97_006: they stayed 21-23 cm open across the chest); worn, it hangs from the waist.
+    # Only where labelled cloth lies above that height and all the passing cloth the pattern does
+    # not label a lower garment's lies under it (a low-backed bodice's back, under the arms by its
+    # height near the axis, fell through the torso: mean_female 83_005)
+    cut = armpit - EXEMPT_BELOW
+    passing, y = lower[garment.panel], garment.positions[:, 1]
+    unlabelled = passing & ~labelled[garment.panel]
+    above = body.vertices[:, 1] > cut
+    if not (y[passing & ~unlabelled] >= cut).any() or (y[unlabelled] >= cut).any():
+        above[:] = False
+    arm = arm | above
     if plan.segments is None:
         keep = ~arm[body.faces].any(axis=1)
         without = render_body_maps(Body(body.vertices, body.faces[keep]), texel=request.texel, window=plan.window,
@@ -539,7 +558,9 @@ def _arms_passed(body: Body, garment, plan: TryOnPlan, request: TryOnOptions, to
                                    window=plan.window, tol=tolerance, segments=plan.segments)
     names = ", ".join(garment.panel_names[i] for i in np.flatnonzero(lower))
     return PassThrough(without, lower[garment.panel],
-                       f"{names}: passed through the hanging arms while sewn and until the drape first settled "
+                       f"{names}: passed through the hanging arms"
+                       f"{' and the body from 10 cm under the armpits up' if above.any() else ''} while sewn "
+                       "and until the drape first settled "
                        "(as in GarmentCode's simulator: a skirt's side seams otherwise catch on the hands), "
                        "then draped against the whole body")
 
@@ -723,15 +744,22 @@ def fit_warnings(strain: float, fabric, settled: bool, budget: float, pattern_fi
     return out
 
 
-def hang_shift(placed: np.ndarray, draped: np.ndarray, vertex_map: np.ndarray | None = None) -> dict[str, float]:
+def hang_shift(placed: np.ndarray, draped: np.ndarray, vertex_map: np.ndarray | None = None,
+               judged: np.ndarray | None = None) -> dict[str, float]:
     """How far (m, up positive) the garment's highest and lowest points moved in height from the
     placement to the drape, and its bulk: the median vertex's move (through vertex_map, placed
     vertex -> draped; without one, the top's). A garment hanging on the body moves a few
-    centimetres; one that slid off or collapsed moves far more, its bulk with it."""
-    top = float(draped[:, 1].max() - placed[:, 1].max())
+    centimetres; one that slid off or collapsed moves far more, its bulk with it.
+    judged: (placed vertices,) bool -- the part whose top and bulk are measured (with vertex_map;
+    a dress's bodice: its skirt laid out in a ring above its head falls by design), None: all."""
+    ok = vertex_map is not None and len(vertex_map) == len(placed)
+    part = judged if ok and judged is not None and judged.any() else None
+    p, d = (placed, draped) if part is None else (placed[part], draped[vertex_map[part]])
+    top = float(d[:, 1].max() - p[:, 1].max())
     bulk = top
-    if vertex_map is not None and len(vertex_map) == len(placed):
-        bulk = float(np.median(draped[vertex_map, 1] - placed[:, 1]))
+    if ok:
+        bulk = float(np.median(draped[vertex_map, 1] - placed[:, 1])) if part is None else \
+            float(np.median(d[:, 1] - p[:, 1]))
     return {"top": top, "hem": float(draped[:, 1].min() - placed[:, 1].min()), "bulk": bulk}
 
 
