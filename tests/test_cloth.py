@@ -819,6 +819,35 @@ def test_weld_keeps_the_longer_rest_of_an_eased_seam():
     assert len(rest) == len(w.springs)  # no duplicate springs left
 
 
+def test_a_gathered_edge_carries_no_force_until_welded():
+    """Two one-quad panels stitched along edges of 10 and 30 mm (a gather: the longer sewn into
+    the shorter): while sewing, the long edge's spring pushes nothing back (k = 0) -- at its full
+    rest it held a cuff 80-93 % stretched round a gathered sleeve end -- and the short edge's and
+    every other spring keep theirs; welded, the seam's spring has the short rest and the short
+    edge's stiffness."""
+    uv = np.array([[0, 0], [0.010, 0], [0.010, 0.010], [0, 0.010],  # panel A: 10 mm top edge 3-2
+                   [0, 0.02], [0.030, 0.02], [0.030, 0.03], [0, 0.03]])  # panel B: 30 mm bottom edge 4-5
+    quads = np.array([[0, 1, 2, 3], [4, 5, 6, 7]], dtype=np.int32)
+    panel, lattice = np.array([0, 0, 0, 0, 1, 1, 1, 1]), np.full((8, 2), -1)
+    seams = np.array([[3, 4], [2, 5]], dtype=np.int32)
+    fab = get_fabric("cotton")
+    m = build_model(uv, panel, lattice, quads, np.zeros((0, 3), np.int32), seams, fab, 0.01)
+    k = {tuple(sorted(p)): (kk, kind) for p, kk, kind in zip(m.springs.tolist(), m.stiffness, m.kind)}
+    assert k[(4, 5)][0] == 0.0  # the gathered (long) edge
+    assert k[(2, 3)][0] > 0 and k[(0, 1)][0] > 0 and k[(6, 7)][0] > 0
+    assert sum(kk == 0.0 for kk, _ in k.values()) == 1
+    vmap = merge_map(m.n, seams.astype(np.int64))
+    w = weld_model(m, vmap)
+    seam = [i for i, p in enumerate(w.springs.tolist()) if sorted(p) == sorted((vmap[2], vmap[3]))]
+    assert len(seam) == 1 and np.isclose(w.rest[seam[0]], 0.010) and w.stiffness[seam[0]] == k[(2, 3)][0]
+    assert (w.stiffness > 0).all()
+    # edges that differ by no more than EASE are not a gather: both springs keep their stiffness
+    uv2 = uv.copy()
+    uv2[[5, 6], 0] = 0.0105
+    m2 = build_model(uv2, panel, lattice, quads, np.zeros((0, 3), np.int32), seams, fab, 0.01)
+    assert (m2.stiffness > 0).all()
+
+
 def _two_strips(h: float = 0.01):
     """Two 1 x 2-quad panels side by side in the flat, A's right column stitched to B's left."""
     uv = np.array([[0, y] for y in (0, h, 2 * h)] + [[h, y] for y in (0, h, 2 * h)] +  # A: 0-2 left, 3-5 seam

@@ -357,6 +357,7 @@ def build_model(uv: np.ndarray, panel: np.ndarray, lattice: np.ndarray, quads: n
             k = np.where(on, spring_stiffness(kind, other, params, h), k)
             allow[on] = (1.0 + other.strain_threshold) / (1.0 + fabric.strain_threshold)
             mass = np.where(on_v, mass * (other.density / fabric.density), mass)
+    k = np.where(_gathered(springs, rest, seams), 0.0, k)
     if np.any(mass <= 0):
         raise InputError("the cloth mesh has vertices that belong to no face")
     mass = np.maximum(mass, MASS_FLOOR * np.median(mass))
@@ -365,6 +366,29 @@ def build_model(uv: np.ndarray, panel: np.ndarray, lattice: np.ndarray, quads: n
     d = uv[b] - uv[a]
     bias = np.where(kind == SHEAR, np.abs(2.0 * d[:, 0] * d[:, 1]) / (rest * rest), 0.0)
     return _biased(_assemble(mass, springs, rest, k, kind, quads, tris, seams, fabric, params, h), bias, allow)
+
+
+def _gathered(springs: np.ndarray, rest: np.ndarray, seams: np.ndarray) -> np.ndarray:
+    """(S,) bool: the springs along the longer edge of a gathered seam -- both ends sewn to the
+    ends of a spring more than EASE shorter. Cloth gathered into a shorter edge folds; such a
+    spring pushing back at its full rest length held a cuff 80-93 % stretched round a bishop
+    sleeve's 57 cm end gathered into its 16 cm (GarmentCode's mean_female 89_008), so it carries
+    no force until the seam is welded (weld_model then keeps the short edge's spring)."""
+    if not len(seams) or not len(springs):
+        return np.zeros(len(springs), bool)
+    n = int(max(springs.max(), seams.max())) + 1
+    partner = np.full(n, -1, dtype=np.int64)
+    partner[seams[:, 0]], partner[seams[:, 1]] = seams[:, 1], seams[:, 0]
+    pa, pb = partner[springs[:, 0]], partner[springs[:, 1]]
+    both = (pa >= 0) & (pb >= 0) & (pa != pb)
+    lo, hi = np.sort(springs, axis=1).astype(np.int64).T
+    keys = lo * n + hi
+    order = np.argsort(keys)
+    want = np.minimum(pa, pb) * n + np.maximum(pa, pb)
+    at = np.clip(np.searchsorted(keys[order], want), 0, len(keys) - 1)
+    found = both & (keys[order][at] == want)
+    other_rest = np.where(found, rest[order][at], np.inf)
+    return found & (rest > (1.0 + EASE) * other_rest)
 
 
 def spring_stiffness(kind: np.ndarray, fabric: Fabric, params: ClothParams, h: float) -> np.ndarray:
@@ -505,9 +529,11 @@ def weld_model(model: ClothModel, vertex_map: np.ndarray, uv: np.ndarray | None 
     shortest = np.full(len(first), np.inf)
     np.minimum.at(shortest, group.ravel(), rest)
     longest = np.where(longest > (1.0 + EASE) * shortest, shortest, longest)
+    stiffest = np.zeros(len(first))  # (a gathered seam's long-edge spring carried none: _gathered)
+    np.maximum.at(stiffest, group.ravel(), k)
     order = np.argsort(first)
-    first, longest = first[order], longest[order]
-    s, rest, k, kind = s[first], longest, k[first], kind[first]
+    first, longest, stiffest = first[order], longest[order], stiffest[order]
+    s, rest, k, kind = s[first], longest, np.where(k[first] > 0.0, k[first], stiffest), kind[first]
     if bias is not None:  # a spring on both sides of a seam: the lesser bias (the stricter limit)
         least = np.full(len(first), np.inf)
         np.minimum.at(least, group.ravel(), bias)
