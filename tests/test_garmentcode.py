@@ -1,10 +1,10 @@
-"""Patterns that GarmentCode's own generator writes (issue 47), as it writes them: eighteen designs
+"""Patterns that GarmentCode's own generator writes (issue 47), as it writes them: nineteen designs
 drawn by ../shared/garmentcode/sample_designs.py on mean_female and f_smpl_average_A40 (kept in
 tests/garmentcode/designs/, MIT; its README says which seed drew each and what it covers: a waistband,
 a fitted dress, pants with cuffs, a gathered skirt, a collar with skirt levels, a hood, a wide skirt
 laid out over the hands, a top on narrow straps, sleeves with a fifteen-gore skirt, a strapless top,
-a sleeveless dress and a bodice cut with no ease, cuffs cut smaller than the arm, a jumpsuit whose
-crotch is too short, a top whose straps do not hold, a gown pooled on the floor, a skirt and a
+a sleeveless dress and a bodice cut with no ease, cuffs cut smaller than the arm, a jumpsuit
+gathered at the waist, a top whose straps do not hold, a gown pooled on the floor, a skirt and a
 flounce laid out in rings past the armpits). The default suite
 reads, checks and meshes them all and drapes several; the slow suite draws a fresh seeded sample and
 drapes it (scripts/bench_garmentcode.py's bars)."""
@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.samples import ROOT, SAMPLES
+from tests.samples import ROOT, SAMPLES, SMPL_BODY
 
 DESIGNS = ROOT / "tests" / "garmentcode" / "designs"
 FILES = sorted(DESIGNS.glob("*_specification.json"))
@@ -44,7 +44,7 @@ def test_the_handful_covers_what_it_says():
     names = set().union(*(_panels(p) for p in FILES))
     for part in ("wb_front", "pant_l_cuff_f", "hood", "collar_front", "ins_skirt_front", "sleeve_f", "skirt_panel"):
         assert any(n.startswith(part) or part in n for n in names), part
-    assert len(FILES) == 18
+    assert len(FILES) == 19
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name[:17])
@@ -207,21 +207,20 @@ def test_a_top_whose_straps_do_not_hold_is_said_to_fall_off_the_shoulders():
 
 
 @pytest.mark.integration
-def test_a_jumpsuit_whose_crotch_cannot_reach_the_bodys_says_so():
-    """11_003: GarmentCode sews trousers cut with a low rise to a bodice that ends at the waist
-    (its meta garment keeps the full rise for fitted tops only). The inside leg seams stall 8-9 cm
-    open under the crotch; the error says the rise is too short, with the cloth's length through
-    the crotch (about 55 cm) against the body's from the same height (about 85 cm)."""
+def test_a_jumpsuit_sewn_to_a_bodice_that_ends_at_the_waist_drapes():
+    """11_003: GarmentCode sews trousers cut with a low rise to a bodice that ends at the waist,
+    gathered into it. While the gathered edges pushed back at their full length, the inside leg
+    seams stalled 8-9 cm open under the crotch and the error said the rise was too short (55 cm
+    of cloth where the body measures 85: it counted from where the trousers were laid out, not
+    where they hang). Gathered as cloth gathers (engine.cloth.model._gathered), the jumpsuit
+    drapes -- in a knit, its bodice bloused over the waist seam (looked at)."""
     from engine.body import resolve_body
     from engine.scene.request import TryOnOptions
 
     row = _bench().drape_one(DESIGNS / "mean_female_11_003_specification.json", resolve_body(str(BODY)),
                              TryOnOptions())
-    assert not row["ok"]
-    said = re.search(r"at most (\d+) cm of cloth, where the body measures (\d+) cm through its crotch", row["error"])
-    assert said is not None and "rise is too short" in row["error"], row["error"]
-    cloth, body = int(said.group(1)), int(said.group(2))
-    assert 45 <= cloth <= 65 and 75 <= body <= 95, row["error"]
+    assert row["ok"], row.get("error") or row["reason"]
+    assert row["fabric"] in ("jersey", "stretch_knit"), row["fabric"]
 
 
 @pytest.mark.integration
@@ -297,20 +296,21 @@ def test_a_fitted_dress_sewn_from_its_flat_layout_stays_on_the_shoulders():
 
 @pytest.mark.integration
 def test_a_band_cut_smaller_than_the_body_is_sewn_from_a_knit():
-    """A sleeveless dress GarmentCode gathered into a hem band cut smaller round than mean_female's
-    hips: in cotton (5 % allowed) it stays 15 % stretched as its drape begins. The band, held at
-    cotton's limit, is sewn from stretch_knit (a rib band), the dress in cotton, the report saying
-    which parts and why -- unless the user chose the fabric (theirs stands: in cotton it ends
-    at the strain guard's limit all over, 5.5-6 % since a settled drape is polished
-    (DrapeTuning.polish_at), or past it)."""
+    """A top with a peplum skirt on a waistband GarmentCode cuts smaller round than f_smpl's waist
+    (97_016): in cotton (5 % allowed) the band stays 13 % stretched as its drape begins. The band,
+    held at cotton's limit, is sewn from stretch_knit (a rib band), the top in cotton, the report
+    saying which parts and why -- unless the user chose the fabric (theirs stands: in cotton it
+    ends at the strain guard's limit all over, 5.5-6 % since a settled drape is polished
+    (DrapeTuning.polish_at), or past it). (mean_female 11_026, this test's dress until its hem
+    band's gather stopped pushing the band out while sewn, now fits in cotton.)"""
     from engine.body import resolve_body
     from engine.errors import SimulationError
     from engine.pattern.io import load_pattern
     from engine.scene.request import TryOnOptions
     from engine.scene.tryon import run_tryon
 
-    body = resolve_body(str(BODY))
-    spec = load_pattern(DESIGNS / "mean_female_11_026_specification.json")
+    body = resolve_body(str(SMPL_BODY))
+    spec = load_pattern(DESIGNS / "f_smpl_average_A40_97_016_specification.json")
     said = []
     res, rep = run_tryon(body, spec, progress=lambda stage, f, msg: said.append(msg))
     parts = rep.get("panel_fabrics", {})
@@ -349,18 +349,24 @@ def test_a_pattern_too_tight_for_cotton_is_draped_in_a_knit():
 @pytest.mark.integration
 def test_cloth_left_inside_the_feet_by_the_maps_settles_against_the_mesh():
     """f_smpl 23_017, a gown whose hem pools on the floor round the feet: against the collision
-    maps (5 mm texels round the edges of the feet) it settles with cloth 2.3 mm inside the body's
-    mesh; it goes on against the mesh itself until it settles again, under the 2 mm bar
-    (DrapeTuning.finish_pen), and the report says so."""
+    maps (5 mm texels round the edges of the feet) it settles with cloth inside the body's mesh
+    (2.3 mm in cotton; 1.1 mm since its gathered seams stopped pushing back while sewn and it
+    drapes in stretch_knit -- under the default DrapeTuning.finish_pen, 1.5 mm, so asked here from
+    0.5 mm); it goes on against the mesh itself until it settles again, shallower, and the report
+    says so."""
+    from dataclasses import replace
+
     from engine.body import resolve_body
     from engine.pattern.io import load_pattern
     from engine.scene.tryon import run_tryon
+    from engine.scene.tuning import Tuning
     from tests.samples import SMPL_BODY
 
     spec = load_pattern(DESIGNS / "f_smpl_average_A40_23_017_specification.json")
-    res, rep = run_tryon(resolve_body(str(SMPL_BODY)), spec)
+    t = Tuning()
+    res, rep = run_tryon(resolve_body(str(SMPL_BODY)), spec, tuning=replace(t, drape=replace(t.drape, finish_pen=0.0005)))
     fin = rep["exact_finish"]
-    assert fin["kept"] and fin["penetration_mm_before"] > 2.0, fin
+    assert fin["kept"] and fin["penetration_mm_before"] > 0.5, fin
     assert fin["penetration_mm_after"] < fin["penetration_mm_before"], fin
     assert abs(rep["penetration_mm"]["max"] - fin["penetration_mm_after"]) < 0.05, (rep["penetration_mm"], fin)
     assert rep["penetration_mm"]["max"] <= 2.0 and rep["penetration_mm"]["p99"] <= 0.5, rep["penetration_mm"]

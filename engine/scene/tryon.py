@@ -86,15 +86,22 @@ def _world_height(body: Body, name: str) -> float:
         return float("nan")
 
 
-def fell_off(placed: np.ndarray, draped: np.ndarray, shoulder_y: float) -> float | None:
+def fell_off(placed: np.ndarray, draped: np.ndarray, shoulder_y: float, same: bool = False) -> float | None:
     """How far (m) below the shoulders the top of a garment placed over them ended, where that is
     more than FELL; else None. (A hood or a collar that folds back still rests on the shoulders;
     straps that did not hold let the whole top down: GarmentCode's necklines cut past the
-    armholes.)"""
+    armholes.) same: draped[i] is placed[i]'s vertex -- then each side placed over its shoulder
+    is judged by its own cloth: one strap that held kept the top up while the other side fell to
+    the waist (mean_female 37_025 in jersey)."""
     near = np.hypot(placed[:, 0], placed[:, 2]) < OVER_AXIS
     if not np.isfinite(shoulder_y) or not near.any() or placed[near, 1].max() < shoulder_y - OVER_SHOULDERS:
         return None
     below = shoulder_y - float(draped[:, 1].max())
+    if same:
+        for side in (-1.0, 1.0):
+            on = near & (side * placed[:, 0] > SIDE_OF_AXIS)
+            if on.any() and placed[on, 1].max() >= shoulder_y - OVER_SHOULDERS:
+                below = max(below, shoulder_y - float(draped[on, 1].max()))
     return below if below > FELL else None
 
 
@@ -378,7 +385,8 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     vm = res.vertex_map
     part = judged is not None and judged.any() and vm is not None and len(vm) == len(judged)
     fell = fell_off(garment.positions[judged] if part else garment.positions,
-                    res.positions[vm[judged]] if part else res.positions, _world_height(body, "shoulder_height"))
+                    res.positions[vm[judged]] if part else res.positions, _world_height(body, "shoulder_height"),
+                    same=bool(part))
     if slid(shift, SLID_OFF):  # settled, but not on the body: never written as a result
         raise _slid(body, res, shift, placement_note, crossing_hint(garment))
     if not pattern_file and rode_up(shift, res.strain_max, fab):  # (a pattern file's layout may rise into place)
@@ -713,6 +721,7 @@ SLID_OFF = 0.25
 FELL = 0.15  # m: a garment placed over the shoulders whose top ends this far below them fell off them
 OVER_SHOULDERS = 0.05  # m: (placed over them: its top at least this near their height ...
 OVER_AXIS = 0.4  # m: ... this near the body's vertical axis: a wide skirt laid flat in a ring
+SIDE_OF_AXIS = 0.03  # m: (fell_off: cloth this far to one side of the axis is that shoulder's)
 # rises above the shoulders 1.2-2.2 m to the side, and is worn at the waist)
 RODE_UP = 0.06  # m: a catalogue garment whose bulk rose this far and ended tight is too small (_rode_up)
 HEM_RISE = 0.15  # m: ... whose lowest point ends this far above its placed height bunched up ...
@@ -845,7 +854,7 @@ def hang_warnings(shift: dict[str, float], crossing: str | None = None,
     out = []
     if fell is not None:
         out.append(f"the garment fell off the shoulders: placed over them, its top ended {100 * fell:.0f} cm "
-                   "below them (look at the pictures)")
+                   "below them, on one side at least (look at the pictures)")
     if slid(shift, TOP_DROP):
         out.append(f"the garment slid {-100 * shift['top']:.0f} cm down the body from where it was placed: "
                    "it may be too large for this body (try a smaller size)")
