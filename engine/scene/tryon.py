@@ -544,7 +544,7 @@ def _arms_passed(body: Body, garment, plan: TryOnPlan, request: TryOnOptions, to
 
     # that cloth passes through the body above where a lower garment is worn too: a circle skirt
     # laid flat in a ring reaches over the chest and head, and its side seams close through them
-    # (f_smpl 97_006: they stayed 21-23 cm open across the chest); worn, it hangs from the waist.
+    # (they stalled across the chest: f_smpl 97_006); worn, it hangs from the waist.
     # Only where labelled cloth lies above that height and all the passing cloth the pattern does
     # not label a lower garment's lies under it (a low-backed bodice's back, under the arms by its
     # height near the axis, fell through the torso: mean_female 83_005)
