@@ -549,10 +549,9 @@ def _arms_passed(body: Body, garment, plan: TryOnPlan, request: TryOnOptions, to
     # not label a lower garment's lies under it (a low-backed bodice's back, under the arms by its
     # height near the axis, fell through the torso: mean_female 83_005)
     cut = armpit - EXEMPT_BELOW
-    passing, y = lower[garment.panel], garment.positions[:, 1]
-    unlabelled = passing & ~labelled[garment.panel]
+    passing, mine, y = lower[garment.panel], labelled[garment.panel], garment.positions[:, 1]
     above = body.vertices[:, 1] > cut
-    if not (y[passing & ~unlabelled] >= cut).any() or (y[unlabelled] >= cut).any():
+    if not (y[passing & mine] >= cut).any() or (y[passing & ~mine] >= cut).any():
         above[:] = False
     arm = arm | above
     if plan.segments is None:
@@ -565,9 +564,10 @@ def _arms_passed(body: Body, garment, plan: TryOnPlan, request: TryOnOptions, to
         without = render_body_maps(Body(body.vertices, body.faces, segments=seg), texel=request.texel,
                                    window=plan.window, tol=tolerance, segments=plan.segments)
     names = ", ".join(garment.panel_names[i] for i in np.flatnonzero(lower))
+    also = f" and the body from {100 * EXEMPT_BELOW:.0f} cm under the armpits up" if above.any() else ""
     return PassThrough(without, lower[garment.panel],
-                       f"{names}: passed through the hanging arms"
-                       f"{' and the body from 10 cm under the armpits up' if above.any() else ''} while sewn "
+                       f"{names}: passed through the hanging arms{also}"
+                       " while sewn "
                        "and until the drape first settled "
                        "(as in GarmentCode's simulator: a skirt's side seams otherwise catch on the hands), "
                        "then draped against the whole body")
@@ -762,13 +762,11 @@ def hang_shift(placed: np.ndarray, draped: np.ndarray, vertex_map: np.ndarray | 
     judged: (placed vertices,) bool -- the part whose top and bulk are measured (with vertex_map;
     a dress's bodice: its skirt laid out in a ring above its head falls by design), None: all."""
     ok = vertex_map is not None and len(vertex_map) == len(placed)
-    part = judged if ok and judged is not None and judged.any() else None
-    p, d = (placed, draped) if part is None else (placed[part], draped[vertex_map[part]])
+    part = judged if ok and judged is not None and judged.any() else np.ones(len(placed), bool)
+    p = placed[part]
+    d = draped[vertex_map[part]] if ok else draped
     top = float(d[:, 1].max() - p[:, 1].max())
-    bulk = top
-    if ok:
-        bulk = float(np.median(draped[vertex_map, 1] - placed[:, 1])) if part is None else \
-            float(np.median(d[:, 1] - p[:, 1]))
+    bulk = float(np.median(d[:, 1] - p[:, 1])) if ok else top
     return {"top": top, "hem": float(draped[:, 1].min() - placed[:, 1].min()), "bulk": bulk}
 
 
