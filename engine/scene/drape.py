@@ -538,7 +538,7 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
     err.open_points = 0.5 * (state.x[op[:, 0]] + state.x[op[:, 1]])  # (where they lie: tryon's hints)
     err.too_small = True  # (engine.scene.garments.add_size_hint)
     # where the open seams were placed (engine.scene.garments.arms_in_the_way)
-    err.open_top = float(garment.positions[garment.seams[~welded].ravel(), 1].max())
+    err.open_top = float(garment.positions[op.ravel(), 1].max())
     return err
 
 
@@ -885,13 +885,12 @@ UNSTABLE_WHY = ("the garment may have been sewn shut tangled round the body (loo
 
 
 def _check_finite(state: ClothState, stage: str, floor: float | None = None) -> None:
-    why = UNSTABLE_WHY
     if not (np.all(np.isfinite(state.x)) and np.all(np.isfinite(state.v))):
-        raise SimulationError(f"the cloth became unstable while {stage} (non-finite positions): {why}, "
+        raise SimulationError(f"the cloth became unstable while {stage} (non-finite positions): {UNSTABLE_WHY}, "
                               "or a softer fabric")
     if state.x[:, 1].max() < (FELL_BELOW if floor is None else floor + FELL_ON_FLOOR):
         raise SimulationError(f"the garment fell off the body while {stage} (all of it below the feet): it is far "
                               "too large for this body, or its pattern places it away from the body; try a "
                               "smaller size, or check the panels' translation")
     if np.abs(state.x).max() > 100.0:
-        raise SimulationError(f"the cloth flew off while {stage} (a vertex is more than 100 m away): {why}")
+        raise SimulationError(f"the cloth flew off while {stage} (a vertex is more than 100 m away): {UNSTABLE_WHY}")

@@ -349,8 +349,8 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     held, held_note = attachment(garment, body)
     # (a pattern file's own layout: GarmentCode's reaches its body's hands; the catalogue's and a
     # DXF's placements start clear of the arms)
-    passing = _arms_passed(body, garment, plan, request, tuning.cloth.tolerance,
-                           lower=lower_labelled(spec)) if pattern_file else None
+    lower = lower_labelled(spec) if pattern_file else frozenset()
+    passing = _arms_passed(body, garment, plan, request, tuning.cloth.tolerance, lower=lower) if pattern_file else None
     if passing is not None:
         map_info["passed_through"] = passing.why
     try:
@@ -379,7 +379,7 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     placed[:, 1] = np.maximum(placed[:, 1], floor)
     # (a lower garment's panels laid out in rings above the waist -- over the head -- fall by
     # design: where the pattern has others, those say whether it slid or fell off the shoulders)
-    judged = ~np.isin(garment.panel_names, list(lower_labelled(spec)))[garment.panel] if pattern_file else None
+    judged = ~np.isin(garment.panel_names, list(lower))[garment.panel] if pattern_file else None
     shift = hang_shift(placed, res.positions, res.vertex_map, judged)
     shrunk = shortest_panel(garment, res, placed)
     vm = res.vertex_map
@@ -721,8 +721,8 @@ SLID_OFF = 0.25
 FELL = 0.15  # m: a garment placed over the shoulders whose top ends this far below them fell off them
 OVER_SHOULDERS = 0.05  # m: (placed over them: its top at least this near their height ...
 OVER_AXIS = 0.4  # m: ... this near the body's vertical axis: a wide skirt laid flat in a ring
-SIDE_OF_AXIS = 0.03  # m: (fell_off: cloth this far to one side of the axis is that shoulder's)
 # rises above the shoulders 1.2-2.2 m to the side, and is worn at the waist)
+SIDE_OF_AXIS = 0.03  # m: (fell_off: cloth this far to one side of the axis is that shoulder's)
 RODE_UP = 0.06  # m: a catalogue garment whose bulk rose this far and ended tight is too small (_rode_up)
 HEM_RISE = 0.15  # m: ... whose lowest point ends this far above its placed height bunched up ...
 PANEL_TALL = 0.15  # m: ... where a panel placed at least this tall ...
