@@ -351,12 +351,13 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     # DXF's placements start clear of the arms)
     lower = lower_labelled(spec) if pattern_file else frozenset()
     passing = _arms_passed(body, garment, plan, request, tuning.cloth.tolerance, lower=lower) if pattern_file else None
+    arms = _hanging(body, whole=True) if pattern_file and lift is None else None
     if passing is not None:
         map_info["passed_through"] = passing.why
     try:
         res = sew_and_drape(garment, collider, request, tuning, progress, observer=observer, attachment=held,
                             body_bvh=bvh if lift is None else None, pass_through=passing,
-                            floor=floor, panel_fabrics=panel_fabrics)
+                            floor=floor, panel_fabrics=panel_fabrics, arms=arms)
     except SimulationError as e:
         _carried_hint(e, placement_note, body)
         _hand_hint(e, body)
@@ -381,7 +382,9 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     # design: where the pattern has others, those say whether it slid or fell off the shoulders)
     judged = ~np.isin(garment.panel_names, list(lower))[garment.panel] if pattern_file else None
     shift = hang_shift(placed, res.positions, res.vertex_map, judged)
-    shrunk = shortest_panel(garment, res, placed)
+    areas = _panel_areas(spec)
+    shrunk = shortest_panel(garment, res, placed,
+                            skip={n for n, a in areas.items() if a < SMALL_PART * sum(areas.values())})
     vm = res.vertex_map
     part = judged is not None and judged.any() and vm is not None and len(vm) == len(judged)
     fell = fell_off(garment.positions[judged] if part else garment.positions,
@@ -490,6 +493,13 @@ def lower_labelled(spec: PatternSpec) -> frozenset[str]:
     return frozenset(n for n, p in spec.pattern.panels.items() if p.label == LOWER_LABEL)
 
 
+def _hanging(body: Body, whole: bool = False) -> np.ndarray | None:
+    """engine.body.hanging.hanging_arms of the body, under its armpits."""
+    from engine.body.hanging import hanging_arms
+
+    return hanging_arms(body, _armpit_y(body), whole)
+
+
 def _arms_passed(body: Body, garment, plan: TryOnPlan, request: TryOnOptions, tolerance: float,
                  lower: frozenset[str] = frozenset()):
     """The PassThrough (engine.collide.collider) of a garment with panels that hang wholly below
@@ -500,10 +510,8 @@ def _arms_passed(body: Body, garment, plan: TryOnPlan, request: TryOnOptions, to
     wherever their layout's top lies, if their middle is."""
     if request.collision != "image" or (plan.segments is not None and not any("arm" in s for s in plan.segments)):
         return None
-    from engine.body.hanging import hanging_arms
-
     armpit = _armpit_y(body)
-    arm = hanging_arms(body, armpit)  # (None where the armpits cannot be found)
+    arm = _hanging(body)  # (None where the armpits cannot be found)
     if arm is None:
         return None
 
@@ -729,6 +737,10 @@ PANEL_TALL = 0.15  # m: ... where a panel placed at least this tall ...
 BUNCHED = 0.6  # ... hangs shorter than this share of the length it can hang (hang_warnings) ...
 HUNG_FROM = 0.03  # m: ... reaching from its highest seam (sewn to none: its vertices this near its top)
 ACROSS_SHARE = 0.25  # ... of those across it at least this share of the longest as long
+# (a part under this share of the garment's cloth lies as the body under it has it lie -- a collar
+# along a deep V, a flounce round a wrist on a sloping arm, no hanging length to judge: the
+# garment bunched up only where a larger panel hangs short)
+SMALL_PART = 0.05
 TIGHT = 0.01  # a drape stretched past the fabric's threshold by more than this is reported tight
 # (issue 3's quality limit; the strain guard holds a garment that fits at threshold + 0.5 %, a knit 0.3 %)
 # a pattern file too tight for the default fabric is draped again in these knits in turn: a
@@ -787,8 +799,8 @@ def sharp_folds(positions: np.ndarray, triangles: np.ndarray, degrees: float = 1
     return {"count": int((angles > np.radians(degrees)).sum()), "edges": int(len(angles)), "degrees": degrees}
 
 
-def shortest_panel(garment: Garment, res: DrapeResult,
-                   placed: np.ndarray | None = None) -> tuple[float, str, float, float] | None:
+def shortest_panel(garment: Garment, res: DrapeResult, placed: np.ndarray | None = None,
+                   skip=()) -> tuple[float, str, float, float] | None:
     """Of the panels placed at least PANEL_TALL tall, the one whose drape is shortest for the
     length it can hang: (draped height / that length, its name, draped m, length m); None when no
     panel is that tall or the drape has no map from the garment's vertices. The length is the
@@ -798,7 +810,8 @@ def shortest_panel(garment: Garment, res: DrapeResult,
     length runs down the side; a panel sewn only along such seams -- a collar on a V neckline --
     hangs from all of them; a panel sewn nowhere hangs from its top HUNG_FROM). A ring
     sector (a circle peplum, a ruffle tier) laid out flat 95 cm tall hangs its ring's width, 17 cm.
-    placed: the garment's positions to measure from (default garment.positions)."""
+    placed: the garment's positions to measure from (default garment.positions); skip: panel
+    names not judged (run_tryon: those under SMALL_PART of the cloth)."""
     from scipy.spatial import cKDTree
 
     vmap = res.vertex_map
@@ -809,7 +822,7 @@ def shortest_panel(garment: Garment, res: DrapeResult,
     seams, sid = garment.seams, garment.seam_id
     for p, name in enumerate(garment.panel_names):
         on = garment.panel == p
-        if not on.any():
+        if not on.any() or name in skip:
             continue
         placed = float(np.ptp(y0[on]))
         if placed < PANEL_TALL:
