@@ -20,13 +20,13 @@ APART = 0.02  # m: and stays this far from the trunk from APART_BELOW under the 
 APART_BELOW = 0.10  # passed through an arm held closer would be caught between arm and trunk)
 
 
-def hanging_arms(body: Body, armpit_y: float, whole: bool = False) -> np.ndarray | None:
+def hanging_arms(body: Body, armpit_y: float, whole: bool = False):
     """(N,) bool: the body's vertices on an arm that hangs apart from the trunk, from APART_BELOW
     under armpit_y (world height) down -- the arms by their segment labels, or where the body has
     none, the parts of the mesh below the cut that are not joined to the trunk there -- that stay
     at least APART from the trunk there (an A-pose's arms; not arms held against the torso, hands
-    on the hips). None where there is no such arm. whole: such an arm from the cut down, the upper
-    arm beside the armpit too."""
+    on the hips). None where there is no such arm. whole: (that, the same arms from the cut down,
+    the upper arm beside the armpit too)."""
     v, f = body.vertices, np.asarray(body.faces)
     if not np.isfinite(armpit_y) or not len(f):
         return None
@@ -44,12 +44,15 @@ def hanging_arms(body: Body, armpit_y: float, whole: bool = False) -> np.ndarray
     if not trunk.any():
         return None
     tree = cKDTree(v[trunk])
-    arm = np.zeros(len(v), bool)
+    arm, full = np.zeros(len(v), bool), np.zeros(len(v), bool)
     low = v[:, 1] < armpit_y - APART_BELOW
     for p in parts:
         if (p & low).any() and tree.query(v[p & low], distance_upper_bound=APART)[0].min() >= APART:
-            arm |= p if whole else p & low  # (the upper arm beside the armpit stays: a top's side is sewn there)
-    return arm if arm.any() else None
+            arm |= p & low  # (the upper arm beside the armpit stays: a top's side is sewn there)
+            full |= p
+    if not arm.any():
+        return None
+    return (arm, full) if whole else arm
 
 
 def _apart_below(v: np.ndarray, f: np.ndarray, below: np.ndarray, armpit_y: float) -> list[np.ndarray]:

@@ -130,7 +130,9 @@ class _Dressing:
     layered: bool = False  # with cloth-cloth contact (engine.scene.layers)
     body: object = None  # the body's MeshBVH (seam pairs meeting beside it, SewTuning.meet_outside), or None
     pass_through: PassThrough | None = None  # parts of the body some cloth passes through until it hangs
-    arms: np.ndarray | None = None  # (body vertices,) bool: the arms hanging apart from the trunk, or None
+    # (body vertices,) bool x 2: the arms hanging apart from the trunk (engine.body.hanging), and
+    # those arms whole from under the armpits; or None
+    arms: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def exempt(self) -> np.ndarray | None:
@@ -162,26 +164,24 @@ class _Dressing:
 
     @cached_property
     def beside_arm(self) -> np.ndarray | None:
-        """(P,) bool: the stitch pairs of panels that lie, as placed, over the trunk (each panel's
-        middle nearest a body vertex off the hanging arms), or None without arms: where such a
-        pair's path runs through an arm, the arm is outside the garment (it leaves by an armhole
-        above), and the pair meets on the trunk's side of it (_meet_beside)."""
+        """(P,) bool: the stitch pairs of panels that lie, as placed, over the trunk (most of each
+        panel's cloth nearest a body vertex off the arms), or None without arms: where such a
+        pair's path runs through a hanging arm, the arm is outside the garment (it leaves by an
+        armhole above), and the pair meets on the trunk's side of it (_meet_beside)."""
         if self.arms is None or self.body is None or not len(self.garment.seams):
             return None
         from scipy.spatial import cKDTree
 
         g = self.garment
         n = int(g.panel.max()) + 1
-        c = np.zeros((n, 3))
-        np.add.at(c, g.panel, g.positions)
-        c /= np.maximum(np.bincount(g.panel, minlength=n), 1)[:, None]
-        on_arm = self.arms[cKDTree(self.body.verts).query(c)[1]]
-        return ~on_arm[g.panel[g.seams]].any(axis=1)
+        near_arm = self.arms[1][cKDTree(self.body.verts).query(g.positions)[1]]
+        share = np.bincount(g.panel, weights=near_arm, minlength=n) / np.maximum(np.bincount(g.panel, minlength=n), 1)
+        return ~(share[g.panel[g.seams]] >= 0.5).any(axis=1)
 
     @cached_property
     def body_axis(self) -> tuple[float, float]:
         """(x, z) of the body's vertical axis: the median of its vertices off the hanging arms."""
-        v = self.body.verts if self.arms is None else self.body.verts[~self.arms]
+        v = self.body.verts if self.arms is None else self.body.verts[~self.arms[1]]
         return float(np.median(v[:, 0])), float(np.median(v[:, 2]))
 
     def solver(self, model: ClothModel, exempt: np.ndarray | None = None) -> ClothSolver:
@@ -230,7 +230,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOpt
                   tuning: Tuning = Tuning(), progress: Progress = _noop, observer: Observer | None = None,
                   attachment: Attachment | None = None, body_bvh=None,
                   pass_through: PassThrough | None = None, floor: float | None = None,
-                  panel_fabrics: dict[str, str] | None = None, arms: np.ndarray | None = None) -> DrapeResult:
+                  panel_fabrics: dict[str, str] | None = None, arms: tuple | None = None) -> DrapeResult:
     """Sew the placed panels, then drape them, against the same collider (module doc). attachment:
     vertices held on planes while sewing and draping (engine.scene.attach). body_bvh: the body's
     MeshBVH (engine.collide.bvh), for seam pairs whose path runs through the body (None: not).
@@ -241,8 +241,9 @@ def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOpt
     layout, under the feet, and they rise into place as they are sewn (held up by the ground at
     1 m/s instead, f_smpl 2_003's ended 17 % stretched in jersey; it drapes in cotton at 5.5 %).
     panel_fabrics: panel name -> the fabric it is sewn from where not the request's (build_model).
-    arms: (body vertices,) bool, the arms hanging apart from the trunk (engine.body.hanging; with
-    body_bvh): a trunk panel's seam caught round one closes between it and the trunk.
+    arms: ((body vertices,) bool x 2) the arms hanging apart from the trunk, and those arms whole
+    (engine.body.hanging.hanging_arms; with body_bvh): a trunk panel's seam caught round one
+    closes between it and the trunk.
     A garment refused as too small (in sewing or draping) names on the error, as tight_panels, the
     panels that were held past their limit (_too_small_panels, held_panels); a drape names them in
     DrapeResult.held."""
@@ -473,7 +474,7 @@ def _meet_beside(job: _Dressing, x: np.ndarray, sewing: Sewing, gaps: np.ndarray
         # way towards the body's axis -- round the arm's outer side it stalled, the arm inside
         _, _, _, face, _ = job.body.closest(mid)
         caught = job.beside_arm[on] & (face >= 0)
-        caught[caught] = job.arms[job.body.faces[face[caught], 0]]
+        caught[caught] = job.arms[0][job.body.faces[face[caught], 0]]
         if caught.any():
             axis = np.asarray(job.body_axis)
             d = d.copy()

@@ -493,7 +493,7 @@ def lower_labelled(spec: PatternSpec) -> frozenset[str]:
     return frozenset(n for n, p in spec.pattern.panels.items() if p.label == LOWER_LABEL)
 
 
-def _hanging(body: Body, whole: bool = False) -> np.ndarray | None:
+def _hanging(body: Body, whole: bool = False):
     """engine.body.hanging.hanging_arms of the body, under its armpits."""
     from engine.body.hanging import hanging_arms
 
@@ -811,21 +811,25 @@ def shortest_panel(garment: Garment, res: DrapeResult, placed: np.ndarray | None
     hangs from all of them; a panel sewn nowhere hangs from its top HUNG_FROM). A ring
     sector (a circle peplum, a ruffle tier) laid out flat 95 cm tall hangs its ring's width, 17 cm.
     placed: the garment's positions to measure from (default garment.positions); skip: panel
-    names not judged (run_tryon: those under SMALL_PART of the cloth)."""
+    names not judged (run_tryon: those under SMALL_PART of the cloth; where every panel that tall
+    is one, the ratio is inf: none bunched)."""
     from scipy.spatial import cKDTree
 
     vmap = res.vertex_map
     if vmap is None or len(vmap) != len(garment.positions):
         return None
-    best = None
+    best, skipped = None, []
     y0, y1 = (garment.positions if placed is None else placed)[:, 1], res.positions[vmap, 1]
     seams, sid = garment.seams, garment.seam_id
     for p, name in enumerate(garment.panel_names):
         on = garment.panel == p
-        if not on.any() or name in skip:
+        if not on.any():
             continue
         placed = float(np.ptp(y0[on]))
         if placed < PANEL_TALL:
+            continue
+        if name in skip:
+            skipped.append(name)
             continue
         draped = float(np.ptp(y1[on]))
         across = []  # its seams across it (not side seams running down): (mean draped height, vertices, length)
@@ -852,6 +856,8 @@ def shortest_panel(garment: Garment, res: DrapeResult, placed: np.ndarray | None
         ratio = draped / max(length, 1e-9)
         if best is None or ratio < best[0]:
             best = (ratio, name, draped, length)
+    if best is None and skipped:  # (every panel that tall is a small part: none hangs to judge)
+        return (np.inf, skipped[0], 0.0, 0.0)
     return best
 
 
