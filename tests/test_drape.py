@@ -1016,6 +1016,30 @@ def test_a_collar_sewn_down_a_v_neckline_hangs_from_that_seam():
     assert shortest_panel(garment, SimpleNamespace(positions=crumpled, vertex_map=vmap))[0] < BUNCHED
 
 
+def test_a_small_part_lying_short_does_not_make_a_garment_bunched():
+    """A collar along a deep V or a flounce round a wrist on a sloping arm lies as the body has it
+    lie, shorter than the length it could hang: run_tryon skips such parts (under SMALL_PART of
+    the cloth) when it judges bunching. The largest panel still says so; where every panel placed
+    that tall is skipped, none hangs to judge (inf), not the risen hem alone."""
+    from types import SimpleNamespace
+
+    from engine.scene.tryon import BUNCHED, hang_shift, hang_warnings, shortest_panel
+
+    y = np.linspace(0.0, 0.5, 11)
+    placed = np.column_stack([np.zeros(22), np.concatenate([y, 0.5 + y / 5]), np.zeros(22)])  # flounce 50, body 10 cm
+    garment = SimpleNamespace(positions=placed, uv=placed[:, :2].copy(), panel=np.repeat([0, 1], 11),
+                              panel_names=["flounce", "body"], seams=np.zeros((0, 2), int), seam_id=np.zeros(0, int))
+    worn = placed.copy()
+    worn[:11, 1] = 0.9 + 0.1 * y  # the flounce risen 90 cm round a wrist, 5 cm tall
+    res = SimpleNamespace(positions=worn, vertex_map=np.arange(22))
+    ratio, name, _, _ = shortest_panel(garment, res)
+    assert name == "flounce" and ratio < BUNCHED
+    assert "bunched up" in hang_warnings(hang_shift(placed, worn, np.arange(22)), None, shortest_panel(garment, res))[0]
+    skipped = shortest_panel(garment, res, skip={"flounce"})
+    assert skipped[0] == np.inf and not skipped[0] < BUNCHED
+    assert hang_warnings(hang_shift(placed, worn, np.arange(22)), None, skipped) == []
+
+
 def test_a_knit_is_guarded_closer_to_its_threshold_than_cotton():
     """The strain guard holds a knit (jersey: allowed 15 %) 0.3 % past its threshold and cotton
     0.5 %: the softer cloth overshoots the guard more between its passes, and at 0.5 % jersey

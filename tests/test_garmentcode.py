@@ -1,11 +1,11 @@
-"""Patterns that GarmentCode's own generator writes (issue 47), as it writes them: nineteen designs
+"""Patterns that GarmentCode's own generator writes (issue 47), as it writes them: twenty designs
 drawn by ../shared/garmentcode/sample_designs.py on mean_female and f_smpl_average_A40 (kept in
 tests/garmentcode/designs/, MIT; its README says which seed drew each and what it covers: a waistband,
 a fitted dress, pants with cuffs, a gathered skirt, a collar with skirt levels, a hood, a wide skirt
 laid out over the hands, a top on narrow straps, sleeves with a fifteen-gore skirt, a strapless top,
 a sleeveless dress and a bodice cut with no ease, cuffs cut smaller than the arm, a jumpsuit
 gathered at the waist, a top whose straps do not hold, a gown pooled on the floor, a skirt and a
-flounce laid out in rings past the armpits). The default suite
+flounce laid out in rings past the armpits, a sleeveless sack dress wider than the A-pose's arms). The default suite
 reads, checks and meshes them all and drapes several; the slow suite draws a fresh seeded sample and
 drapes it (scripts/bench_garmentcode.py's bars)."""
 
@@ -44,7 +44,7 @@ def test_the_handful_covers_what_it_says():
     names = set().union(*(_panels(p) for p in FILES))
     for part in ("wb_front", "pant_l_cuff_f", "hood", "collar_front", "ins_skirt_front", "sleeve_f", "skirt_panel"):
         assert any(n.startswith(part) or part in n for n in names), part
-    assert len(FILES) == 19
+    assert len(FILES) == 20
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name[:17])
@@ -221,6 +221,30 @@ def test_a_jumpsuit_sewn_to_a_bodice_that_ends_at_the_waist_drapes():
                              TryOnOptions())
     assert row["ok"], row.get("error") or row["reason"]
     assert row["fabric"] in ("jersey", "stretch_knit"), row["fabric"]
+
+
+@pytest.mark.integration
+def test_a_sack_dress_wider_than_the_arms_closes_its_side_seams_inside_them():
+    """89_016: a sleeveless dress whose side seams GarmentCode lays out beyond the A-posed arms (the
+    hanging forearm lies between its front and back panels). Met round the arm's outer side, the
+    side seam stalled 7 cm open with the forearm through it; a trunk panel's pair caught round a
+    hanging arm meets on the trunk's side of it -- the arm leaves by the armhole (looked at)."""
+    from engine.body import resolve_body
+    from engine.body.hanging import hanging_arms
+    from engine.scene.request import TryOnOptions
+    from engine.scene.tryon import _armpit_y
+
+    body = resolve_body(str(BODY))
+    row = _bench().drape_one(DESIGNS / "mean_female_89_016_specification.json", body, TryOnOptions())
+    assert row["ok"], row.get("error") or row["reason"]
+    # the forearms are outside the dress: no cloth within 2 cm of their lower half all round
+    from scipy.spatial import cKDTree
+
+    arm = hanging_arms(body, _armpit_y(body))
+    pos = row["picture"][0]
+    low = arm & (body.vertices[:, 1] < np.percentile(body.vertices[arm, 1], 50))
+    near = cKDTree(pos).query(body.vertices[low], distance_upper_bound=0.02)[0] < 0.02
+    assert near.mean() < 0.25, near.mean()
 
 
 @pytest.mark.integration
