@@ -320,7 +320,7 @@ def held_panels(garment: Garment, model: ClothModel, x: np.ndarray, vertex_map: 
 
 def _sew(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSolver) -> _Sewn:
     """Sew every stitch pair shut (module doc), once more pulled slower when a flat layout's seams
-    stopped closing; then merge the sewn vertices. Raises SimulationError when seams stay open."""
+    stopped closing (not beside a part too small round the body); then merge the sewn vertices. Raises SimulationError when seams stay open."""
     t = job.tuning.sew
     garment, dt = job.garment, solver.dt
     pairs = garment.seams.astype(np.int64)
@@ -345,6 +345,11 @@ def _sew(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSolv
                           attachment=job.attachment)
         pull = _pull(job, model, state, solver, control, far, retry=attempt + 1 < len(pulls), gap0=gap0)
         if pull.welded.all():
+            break
+        if attempt + 1 < len(pulls) and _too_small_panels(job, model, state, pull.welded) is not None:
+            # (stalled beside cloth stretched far past the fabric: a part too small round the body,
+            # which no slower pull closes -- each pull is 2-3 s of simulated time)
+            pulls = pulls[:attempt + 1]
             break
     its += solver.iterations
     if not pull.welded.all():
@@ -737,11 +742,14 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
     settled = False
     snaps = deque([state.x.copy()], maxlen=2 * SETTLE_CHECKS + 1)  # positions every `sub` steps
     guards = deque(maxlen=SETTLE_CHECKS)  # steps of each sub-window in which the strain guard acted
-    strains = deque(maxlen=max(1, int(round(t.refuse_after / (sub * dt)))))  # max strain at the last checks
+    # max strain at the last checks
+    strains = deque(maxlen=max(1, int(round(max(t.refuse_after, t.knit_tight_after) / (sub * dt)))))
     refuse = fabric.strain_threshold + t.too_tight
     tight = fabric.strain_threshold + t.tight_every_step
     give_up = fabric.strain_threshold + t.knit_give_up
     n_give_up = max(1, int(round(t.knit_give_up_after / (sub * dt))))
+    n_tight = max(1, int(round(t.knit_tight_after / (sub * dt))))
+    n_refuse = max(1, int(round(t.refuse_after / (sub * dt))))
     every_step_from = None
     drift, guard_steps, guard_share = np.inf, 0, 0.0
     released = None if release is None else False  # (whether the whole body took over at a settle)
@@ -772,14 +780,20 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
             # alternate at every step from here on
             control.collide_every = 1
             every_step_from = it + 1
-        if it >= min_it and len(strains) == strains.maxlen and min(strains) > refuse:
-            raise _too_small(state, model, min(strains), fabric,
-                             f"for {len(strains) * sub * dt:.1f} s of draping it stayed stretched at least")
+        if it >= min_it and len(strains) >= n_refuse and (least := min(list(strains)[-n_refuse:])) > refuse:
+            raise _too_small(state, model, least, fabric,
+                             f"for {n_refuse * sub * dt:.1f} s of draping it stayed stretched at least")
         if t.give_up and it >= min_it and len(strains) >= n_give_up and \
                 (least := min(list(strains)[-n_give_up:])) > give_up:
             err = _too_small(state, model, least, fabric,
                              f"for {n_give_up * sub * dt:.2f} s of draping it stayed stretched at least")
             err.gave_up = True  # (DrapeTuning.give_up: another fabric follows)
+            raise err
+        if t.give_up and it >= min_it and len(strains) >= n_tight and \
+                (least := min(list(strains)[-n_tight:])) > tight:
+            err = _too_small(state, model, least, fabric,
+                             f"for {n_tight * sub * dt:.2f} s of draping it stayed stretched at least")
+            err.gave_up = True
             raise err
         if len(snaps) == snaps.maxlen:
             # settled = the shape stopped moving: RMS displacement over each of the last two

@@ -78,6 +78,11 @@ class DrapeTuning:
     give_up: bool = False
     knit_give_up: float = 0.05
     knit_give_up_after: float = 0.25
+    # ... and, less stretched, as soon as it stayed past the threshold + tight_every_step (tight, as
+    # the report says: the next fabric is tried anyway) for knit_tight_after s: such a drape ran to
+    # its budget, the strain guard and the body fighting, before it was found tight (35-45 s of
+    # wall time on a GarmentCode top that then fit jersey in 2 s)
+    knit_tight_after: float = 1.0
     step: StepConfig = StepConfig(strain_guard=0.005)  # (sewing uses it too; its guard waits until welded)
     # a fabric allowed soft_from or more (a knit) is held soft_guard past its threshold: the softer
     # cloth overshoots the guard more between its passes (jersey ended 15.5-16.2 % at 0.5 %: either
