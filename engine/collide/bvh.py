@@ -746,6 +746,26 @@ class ObjectSpaceCollider(Collider):
         return self.status, self.normal, self.velocity, self.depth
 
 
+class RowsObjectSpaceCollider(ObjectSpaceCollider):
+    """ObjectSpaceCollider that answers some points alone (Collider.answers_rows): the solver's
+    carried answers (engine.cloth.carry) then ask only for the points in contact and the clear
+    points that may have reached the band, not for all of them at every query."""
+
+    answers_rows = True
+
+    def query_rows(self, points, rows, n_rows):
+        pts = _as_points(points)
+        if self.status.shape[0] != pts.shape[0]:
+            self._alloc(pts.shape[0])
+        k = rows[:n_rows]
+        st, nr, ve, de = np.empty(n_rows, np.int8), np.empty((n_rows, 3)), np.empty((n_rows, 3)), np.empty(n_rows)
+        b = self.bvh
+        collide_batch(pts[k], self.tolerance, _max_d2(self.max_distance), *b.kernel_args(),
+                      b.vel, b.has_velocity, st, nr, ve, de)
+        self.status[k], self.normal[k], self.velocity[k], self.depth[k] = st, nr, ve, de
+        return self.status, self.normal, self.velocity, self.depth
+
+
 def penetration_stats(body_vertices, body_faces, points, bvh: MeshBVH | None = None) -> dict:
     """How deep points (N, 3) are inside the body, measured exactly against its mesh.
 

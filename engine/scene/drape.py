@@ -750,6 +750,7 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
     n_give_up = max(1, int(round(t.knit_give_up_after / (sub * dt))))
     n_tight = max(1, int(round(t.knit_tight_after / (sub * dt))))
     n_refuse = max(1, int(round(t.refuse_after / (sub * dt))))
+    n_polish = 0 if t.polish_tight_after is None else max(1, int(round(t.polish_tight_after / (sub * dt))))
     every_step_from = None
     drift, guard_steps, guard_share = np.inf, 0, 0.0
     released = None if release is None else False  # (whether the whole body took over at a settle)
@@ -780,6 +781,16 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
             # alternate at every step from here on
             control.collide_every = 1
             every_step_from = it + 1
+        if (n_polish and t.polish_at is not None and not polished and len(strains) >= n_polish
+                and min(list(strains)[-n_polish:]) > fabric.strain_threshold + t.polish_at):
+            # (stretched past polish_at that long while still moving: polished now -- the strain
+            # guard and the contacts had fought for seconds before it settled, or to the budget)
+            polished = True
+            if control.collide_every > 1 and tuning.collide_every is None:
+                control.collide_every = 1
+                every_step_from = it + 1
+            solver.config = replace(solver.config, vm_passes=2 * solver.config.vm_passes,
+                                    contact_rounds=2 * solver.config.contact_rounds)
         if it >= min_it and len(strains) >= n_refuse and (least := min(list(strains)[-n_refuse:])) > refuse:
             raise _too_small(state, model, least, fabric,
                              f"for {n_refuse * sub * dt:.1f} s of draping it stayed stretched at least")
@@ -852,7 +863,7 @@ def _finish_exact(job: _Dressing, res: DrapeResult, solver: ClothSolver, attachm
     maps, until it settles again: the maps' 5 mm texels round off the edges of the feet and the
     tight curves a stretched knit lies on, and cloth resting on the maps' surface there lies 2-3 mm
     inside the mesh. Kept where it settles less deep and no more stretched; res.finish says so."""
-    from engine.collide.bvh import ObjectSpaceCollider, penetration_depth
+    from engine.collide.bvh import RowsObjectSpaceCollider, penetration_depth
 
     t = job.tuning
     before = float(penetration_depth(job.body, res.positions)[0].max())
@@ -860,7 +871,9 @@ def _finish_exact(job: _Dressing, res: DrapeResult, solver: ClothSolver, attachm
         return res
     job.progress("draping", 1.0, f"cloth {1000 * before:.1f} mm inside the body: settling it against the body's "
                                  "mesh itself")
-    exact = ObjectSpaceCollider(job.body.verts, job.body.faces, tolerance=t.cloth.tolerance, max_distance=FINISH_REACH)
+    # (asked for the points whose answers may have changed alone: the cloth has settled)
+    exact = RowsObjectSpaceCollider(job.body.verts, job.body.faces, tolerance=t.cloth.tolerance,
+                                    max_distance=FINISH_REACH)
     tuning = replace(t, drape=replace(t.drape, min_time=t.drape.settle_time, budget=t.drape.finish_budget,
                                       polish_at=None, give_up=False))
     maps = solver.collider

@@ -62,6 +62,10 @@ class DrapeTuning:
     # other step goes on, checking every step, until it settles again (None: never): the strain guard
     # holds threshold + its guard, and where it could not the body pushed back between checks
     polish_at: float | None = 0.0075
+    # ... and one that stays past it this long (s) before it settles is polished then (None: only once
+    # settled): a GarmentCode top held 6.3-6.7 % in cotton for its whole 6 s budget, never settling,
+    # fit cotton at 5.9 % within 0.15 s of being polished
+    polish_tight_after: float | None = 0.3
     budget: float = 6.0  # s of simulated time
     # a drape whose cloth ends deeper in the body than this (m, against its mesh) settles again
     # against the mesh itself, for at most finish_budget s (engine.scene.drape._finish_exact; None: never)
@@ -117,6 +121,10 @@ class DrapeTuning:
         if not (-1.0 < self.knit_give_up <= 1.0 and 0.0 < self.knit_give_up_after <= 60.0):
             raise InputError(f"knit_give_up {self.knit_give_up} / knit_give_up_after {self.knit_give_up_after} s: "
                              "use a strain past the fabric's threshold in (-1, 1] and a time in (0, 60] s")
+        if not (0.0 < self.knit_tight_after <= 60.0):
+            raise InputError(f"knit_tight_after {self.knit_tight_after} s: use a time in (0, 60]")
+        if self.polish_tight_after is not None and not (0.0 < self.polish_tight_after <= 60.0):
+            raise InputError(f"polish_tight_after {self.polish_tight_after} s: use a time in (0, 60] or None")
         if not (0.0 < self.check_time <= 0.01):
             raise InputError(f"drape check_time {self.check_time} s: use a time in (0, 0.01]")
 
