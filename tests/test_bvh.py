@@ -258,6 +258,32 @@ def test_collider_status_and_depth():
     assert np.all(n3[far] == 0.0)
 
 
+def test_a_collider_that_answers_rows_answers_them_as_a_full_query_does():
+    """RowsObjectSpaceCollider.query_rows (the exact finish's collider: the solver's carried
+    answers ask it for some points alone) writes those rows as the full query would, and leaves
+    the others' rows as they were."""
+    from engine.collide.bvh import RowsObjectSpaceCollider
+
+    r, tol = 0.3, 0.01
+    v, f = _sphere(r, 4)
+    rng = np.random.default_rng(3)
+    dirs = rng.normal(size=(200, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    pts = dirs * (r + rng.uniform(-0.03, 0.03, 200))[:, None]
+    full = [a.copy() for a in ObjectSpaceCollider(v, f, tolerance=tol).query(pts)]
+    col = RowsObjectSpaceCollider(v, f, tolerance=tol)
+    assert col.answers_rows
+    col.query(pts + 1.0)  # (every row answered for other points first)
+    before = [a.copy() for a in (col.status, col.normal, col.velocity, col.depth)]
+    rows = np.array([5, 17, 100, 3, 0, 0], dtype=np.int64)
+    out = col.query_rows(pts, rows, 4)
+    k = rows[:4]
+    for got, want, old in zip(out, full, before):
+        np.testing.assert_array_equal(got[k], want[k])
+        rest = np.setdiff1d(np.arange(200), k)
+        np.testing.assert_array_equal(got[rest], old[rest])
+
+
 def test_max_distance_in_mesh_queries():
     v, f = _sphere(0.3, 3)
     bvh = MeshBVH(v, f)
