@@ -163,7 +163,7 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     first = attempt(request, quick, fabric_why)
     if isinstance(first, Exception) and not _no_fit(first):  # (sewing that stalled for another reason)
         raise first
-    if not isinstance(first, Exception) and not first[1]["tight"]:
+    if _fits(first):
         return first
     said = [_how_it_fit(fab, first)]
     # the parts held at the limit in a knit (a rib cuff or band), the rest in the first fabric
@@ -177,7 +177,7 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
         parts.update({n: PART_KNIT for n in named})
         say("sewing", 0.0, f"{said[0]}: draping it again with {_listed(parts)} in {PART_KNIT}, a knit")
         out = attempt(request, quick, fabric_why, parts)
-        if not isinstance(out, Exception) and not out[1]["tight"]:
+        if _fits(out):
             out[1]["warnings"].append(f"{_listed(parts)} sewn from {PART_KNIT}, a knit, as a maker sews a part "
                                       f"cut smaller round than the body (a rib cuff or band): {said[0]}")
             return out
@@ -193,7 +193,7 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
         if last and again:
             say("sewing", 0.0, f"{said[-1]}: draping it in {fab.name} to the end")
             first = attempt(request, tuning, fabric_why)
-            if not isinstance(first, Exception) and not first[1]["tight"]:
+            if _fits(first):
                 return first
             said[0] = _how_it_fit(fab, first)
         why = (f"the pattern's fit: {'; '.join(said)}: cut with no ease there, it is a garment for a knit "
@@ -201,7 +201,7 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
         say("sewing", 0.0, f"{said[-1]}: draping it again in {knit.name}, a knit")
         out = attempt(request.model_copy(update={"fabric": knit.name}), tuning if last else quick, why)
         tried.append((knit, out))
-        if not isinstance(out, Exception) and not out[1]["tight"]:
+        if _fits(out):
             out[1]["warnings"].append(f"draped in {knit.name}, a knit: {'; '.join(said)}")
             return out
         if isinstance(out, Exception) and not _no_fit(out):
@@ -266,6 +266,21 @@ def part_strains(model, x: np.ndarray, panel_fabrics: dict[str, str]) -> dict:
     return out
 
 
+HELD_UNSETTLED = 0.9  # a drape that did not settle with the strain guard acting in this share of its last steps ...
+
+
+def _fits(out) -> bool:
+    """Whether a drape (run_tryon's attempt: (result, report) or error) fits its fabric: not tight,
+    and at rest -- a drape that never settled, the strain guard holding it at the fabric's limit
+    (HELD_UNSETTLED) all along, is a garment at its limit shaking against the body (mean_female
+    83_004 and 89_002 in cotton, polished under the tight mark: 5.8-5.9 % for the whole 6 s budget;
+    each fits jersey and settles)."""
+    if isinstance(out, Exception) or out[1]["tight"]:
+        return False
+    rep = out[1]
+    return rep["settled"] or (rep["strain"].get("guard_share") or 0.0) < HELD_UNSETTLED
+
+
 def _no_fit(err: Exception) -> bool:
     """Whether a SimulationError says the garment does not fit (refused as too small, or its seams
     stalled beside a part stretched far past the fabric) rather than that it could not be sewn."""
@@ -286,6 +301,8 @@ def _how_it_fit(fab, out) -> str:
     allows = f"{fab.name} allows {100 * fab.strain_threshold:.0f} %"
     if getattr(out, "small_part", None) is not None:
         return f"in {fab.name} its seams stopped closing beside cloth stretched {100 * strain:.0f} % where {allows}"
+    if not isinstance(out, Exception) and not out[1]["tight"]:  # (not _fits: did not come to rest)
+        return f"in {fab.name} it did not come to rest, held at the fabric's limit ({100 * strain:.1f} % where {allows})"
     how = f"{100 * strain:.0f} % stretched" if strain is not None else "too stretched"
     ended = "stayed" if getattr(out, "gave_up", False) else "ended"
     return f"in {fab.name} it {ended} {how} where {allows}"
