@@ -549,6 +549,39 @@ def test_a_stall_beside_a_part_too_small_is_sewn_again_in_the_knits(monkeypatch)
     assert calls == ["cotton"], calls
 
 
+def test_a_drape_that_never_came_to_rest_at_the_fabrics_limit_is_draped_in_a_knit(monkeypatch):
+    """A cotton drape under the tight mark that never settled, the strain guard holding it at the
+    limit all along (mean_female 83_004: 5.8 % for the whole budget, shaking against the body),
+    does not fit: the knit that settles is the drape, the warning saying why. One that did not
+    settle with the guard mostly idle (cloth still sliding) stands in cotton."""
+    from types import SimpleNamespace
+
+    import engine.scene.tryon as tryon
+    from engine.body import resolve_body
+    from engine.pattern.io import load_pattern
+
+    calls, share = [], [1.0]
+
+    def scripted(body, spec, request, tuning, why, **kw):
+        calls.append(request.fabric)
+        if request.fabric == "cotton":
+            return SimpleNamespace(held=[]), {"tight": False, "settled": False, "warnings": [], "fabric_why": why,
+                                              "strain": {"max": 0.058, "guard_share": share[0]}}
+        return "knit", {"tight": False, "settled": True, "warnings": [], "fabric_why": why,
+                        "strain": {"max": 0.153, "guard_share": 1.0}}
+
+    monkeypatch.setattr(tryon, "_run_tryon", scripted)
+    body, spec = resolve_body(str(BODY)), load_pattern(DESIGNS / "mean_female_11_026_specification.json")
+    res, rep = tryon.run_tryon(body, spec)
+    assert res == "knit" and calls == ["cotton", "jersey"], calls
+    assert rep["warnings"] == ["draped in jersey, a knit: in cotton it did not come to rest, held at the fabric's "
+                               "limit (5.8 % where cotton allows 5 %)"], rep["warnings"]
+    calls.clear()
+    share[0] = 0.2
+    res, rep = tryon.run_tryon(body, spec)
+    assert calls == ["cotton"] and rep["strain"]["max"] == 0.058, calls
+
+
 def test_parts_held_at_the_fabrics_limit_are_sewn_from_a_knit(monkeypatch):
     """The cotton drape gave up naming the parts it held at cotton's limit (a cuff): it is draped
     again with that part in stretch_knit, the rest in cotton; where that names another part, once

@@ -278,7 +278,7 @@ def _fits(out) -> bool:
     if isinstance(out, Exception) or out[1]["tight"]:
         return False
     rep = out[1]
-    return rep["settled"] or (rep["strain"].get("guard_share") or 0.0) < HELD_UNSETTLED
+    return rep.get("settled", True) or (rep["strain"].get("guard_share") or 0.0) < HELD_UNSETTLED
 
 
 def _no_fit(err: Exception) -> bool:
