@@ -1178,7 +1178,8 @@ def test_a_top_whose_straps_did_not_hold_fell_off_the_shoulders():
 
 
 @pytest.mark.parametrize("bad", [dict(finish_pen=0.0), dict(finish_pen=0.5), dict(finish_budget=0.0),
-                                 dict(finish_budget=60.0)])
+                                 dict(finish_budget=60.0), dict(knit_tight_after=0.0),
+                                 dict(polish_tight_after=-1.0), dict(polish_tight_after=100.0)])
 def test_the_exact_finish_refuses_absurd_settings(bad):
     """DrapeTuning.finish_pen (a depth in metres, or None) and finish_budget (simulated seconds):
     outside their ranges, a plain refusal naming the setting."""
@@ -1186,7 +1187,7 @@ def test_the_exact_finish_refuses_absurd_settings(bad):
 
     with pytest.raises(InputError, match=next(iter(bad))):
         DrapeTuning(**bad).validate()
-    DrapeTuning(finish_pen=None).validate()
+    DrapeTuning(finish_pen=None, polish_tight_after=None).validate()
 
 
 def test_seams_open_over_the_hands_are_said_to_be_there():
