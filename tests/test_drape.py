@@ -819,7 +819,7 @@ def test_a_seam_pair_straddling_a_leg_meets_on_the_side_its_edges_lie():
     pairs = np.stack([np.arange(5), np.arange(5, 10)], axis=1)
     sewing = Sewing(pairs, np.zeros(5, np.bool_), 0.02, 3.0, meet=np.zeros((5, 3)), meet_on=np.zeros(5, np.bool_))
     # the panels' middles lie to +x of their inseams (the panels reach round the outer side)
-    job = SimpleNamespace(body=body, meet_side=np.tile([-0.15, 0.0, 0.0], (5, 1)), tuning=Tuning())
+    job = SimpleNamespace(body=body, meet_side=np.tile([-0.15, 0.0, 0.0], (5, 1)), tuning=Tuning(), beside_arm=None)
     gaps = np.linalg.norm(back - front, axis=1)
     _meet_beside(job, x, sewing, gaps, weld_gap=0.0075)
     assert sewing.meet_on.all()
@@ -853,11 +853,42 @@ def test_a_pair_whose_way_out_crosses_the_body_meets_at_the_nearest_surface():
     x = np.array([[-0.13, 0.0, 0.12], [-0.13, 0.0, -0.12]])  # 24 cm apart, the midpoint 2 cm inside
     sewing = Sewing(np.array([[0, 1]]), np.zeros(1, np.bool_), 0.02, 3.0, meet=np.zeros((1, 3)),
                     meet_on=np.zeros(1, np.bool_))
-    job = SimpleNamespace(body=body, meet_side=np.array([[1.0, 0.0, 0.0]]), tuning=Tuning())
+    job = SimpleNamespace(body=body, meet_side=np.array([[1.0, 0.0, 0.0]]), tuning=Tuning(), beside_arm=None)
     _meet_beside(job, x, sewing, np.array([0.24]), weld_gap=0.0075)
     assert sewing.meet_on[0]
     margin = Tuning().cloth.tolerance + Tuning().sew.meet_margin
     np.testing.assert_allclose(sewing.meet[0], [-0.15 - margin, 0.0, 0.0], atol=0.004)  # this side, not +0.15
+
+
+def test_a_trunk_panels_pair_caught_round_a_hanging_arm_meets_on_the_trunks_side():
+    """A side seam laid out beyond an A-posed arm (a wide sleeveless dress, mean_female 89_016):
+    its pair's path runs inside the arm. Its own way out (square to its edges, outwards) goes round
+    the arm's outer side and stalled there, the arm through the seam; a pair of panels over the
+    trunk (_Dressing.beside_arm) meets on the side of the arm towards the body's axis -- the arm
+    leaves by the armhole. A sleeve's pair (not beside_arm) still goes its own way."""
+    from types import SimpleNamespace
+
+    import trimesh
+
+    from engine.cloth.config import Sewing
+    from engine.collide.bvh import MeshBVH
+    from engine.scene.drape import _meet_beside
+
+    arm = trimesh.creation.cylinder(radius=0.04, height=0.5, sections=48)
+    arm.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))  # along y
+    arm.apply_translation([0.35, 1.0, 0.0])
+    body = MeshBVH(np.asarray(arm.vertices), np.asarray(arm.faces))
+    x = np.array([[0.35, 1.0, 0.06], [0.35, 1.0, -0.06]])  # front and back edge, the arm between
+    margin = Tuning().cloth.tolerance + Tuning().sew.meet_margin
+    for trunk, side in ((True, -1.0), (False, 1.0)):
+        sewing = Sewing(np.array([[0, 1]]), np.zeros(1, np.bool_), 0.02, 3.0, meet=np.zeros((1, 3)),
+                        meet_on=np.zeros(1, np.bool_))
+        job = SimpleNamespace(body=body, meet_side=np.array([[1.0, 0.0, 0.0]]), tuning=Tuning(),
+                              beside_arm=np.array([trunk]), arms=(np.ones(len(arm.vertices), bool),) * 2,
+                              body_axis=(0.0, 0.0))
+        _meet_beside(job, x, sewing, np.array([0.12]), weld_gap=0.0075)
+        assert sewing.meet_on[0]
+        np.testing.assert_allclose(sewing.meet[0], [0.35 + side * (0.04 + margin), 1.0, 0.0], atol=0.004)
 
 
 def test_a_pairs_way_out_is_square_to_its_edges():
