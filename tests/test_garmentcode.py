@@ -450,9 +450,9 @@ def test_a_hooded_top_with_cuffs_too_small_drapes_or_names_its_cuffs():
 @pytest.mark.integration
 def test_a_fresh_seeded_sample_drapes(tmp_path):
     """Twenty designs freshly drawn by GarmentCode's sampler (seed 7) on mean_female. Where we
-    stand (docs/patterns.md): 55-75 % of GarmentCode's designs meet the bars (seed 7: 11 of 20);
-    the target is 95 %. This guards against losing ground, with room for the
-    chaos of sewing and settling (single designs flip with small changes): at least 5 of 20."""
+    stand (docs/patterns.md): 75-95 % of GarmentCode's designs meet the bars (seed 7: 17 of 20,
+    11 a week before); the target is 95 %. This guards against losing ground, with room for the
+    chaos of sewing and settling (single designs flip with small changes): at least 14 of 20."""
     from engine.body import resolve_body
     from engine.scene.request import TryOnOptions
 
@@ -466,7 +466,7 @@ def test_a_fresh_seeded_sample_drapes(tmp_path):
     rows = [bench.drape_one(p, body, TryOnOptions()) for p in paths]
     ok = [r["design"] for r in rows if r["ok"]]
     print(f"{len(ok)} of {len(rows)} drape:", ok, file=sys.stderr)
-    assert len(rows) >= 16 and len(ok) >= 5, [(r["design"], r.get("reason")) for r in rows]
+    assert len(rows) >= 16 and len(ok) >= 14, [(r["design"], r.get("reason")) for r in rows]
 
 
 def test_the_benchmark_groups_stalls_beside_a_part_too_small_apart():
