@@ -786,11 +786,7 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
             # (stretched past polish_at that long while still moving: polished now -- the strain
             # guard and the contacts had fought for seconds before it settled, or to the budget)
             polished = True
-            if control.collide_every > 1 and tuning.collide_every is None:
-                control.collide_every = 1
-                every_step_from = it + 1
-            solver.config = replace(solver.config, vm_passes=2 * solver.config.vm_passes,
-                                    contact_rounds=2 * solver.config.contact_rounds)
+            every_step_from = _polish(solver, control, tuning, it, every_step_from)
         if it >= min_it and len(strains) >= n_refuse and (least := min(list(strains)[-n_refuse:])) > refuse:
             raise _too_small(state, model, least, fabric,
                              f"for {n_refuse * sub * dt:.1f} s of draping it stayed stretched at least")
@@ -826,11 +822,7 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
                     # (settled with the guard not holding: the strain limit and the contacts
                     # alternate twice as often, checked every step, until it settles again)
                     polished = True
-                    if control.collide_every > 1 and tuning.collide_every is None:
-                        control.collide_every = 1
-                        every_step_from = it + 1
-                    solver.config = replace(solver.config, vm_passes=2 * solver.config.vm_passes,
-                                            contact_rounds=2 * solver.config.contact_rounds)
+                    every_step_from = _polish(solver, control, tuning, it, every_step_from)
                     snaps.clear()
                     snaps.append(state.x.copy())
                     continue
@@ -851,6 +843,18 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
                        guard_share=guard_share, snapped=0, released=released,
                        collide_every={"draping": int(every), **({"every_step_from_s": every_step_from * dt}
                                                                 if every_step_from is not None else {})})
+
+
+def _polish(solver: ClothSolver, control: Control, tuning: Tuning, it: int, every_step_from: int | None) -> int | None:
+    """Polish a drape (DrapeTuning.polish_at): collisions checked every step (unless the tuning
+    fixes how often), the strain and contact passes doubled on `solver` until drape() ends;
+    returns the step collisions went every step from."""
+    if control.collide_every > 1 and tuning.collide_every is None:
+        control.collide_every = 1
+        every_step_from = it + 1
+    solver.config = replace(solver.config, vm_passes=2 * solver.config.vm_passes,
+                            contact_rounds=2 * solver.config.contact_rounds)
+    return every_step_from
 
 
 FINISH_REACH = 0.05  # m: the mesh is searched this far round each point (cloth this deep is not finished)
