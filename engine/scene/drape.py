@@ -320,7 +320,8 @@ def held_panels(garment: Garment, model: ClothModel, x: np.ndarray, vertex_map: 
 
 def _sew(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSolver) -> _Sewn:
     """Sew every stitch pair shut (module doc), once more pulled slower when a flat layout's seams
-    stopped closing (not beside a part too small round the body); then merge the sewn vertices. Raises SimulationError when seams stay open."""
+    stopped closing (not beside a part too small round the body); then merge the sewn vertices.
+    Raises SimulationError when seams stay open."""
     t = job.tuning.sew
     garment, dt = job.garment, solver.dt
     pairs = garment.seams.astype(np.int64)
@@ -845,7 +846,8 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
                                                                 if every_step_from is not None else {})})
 
 
-def _polish(solver: ClothSolver, control: Control, tuning: Tuning, it: int, every_step_from: int | None) -> int | None:
+def _polish(solver: ClothSolver, control: Control, tuning: Tuning, it: int,
+            every_step_from: int | None) -> int | None:
     """Polish a drape (DrapeTuning.polish_at): collisions checked every step (unless the tuning
     fixes how often), the strain and contact passes doubled on `solver` until drape() ends;
     returns the step collisions went every step from."""
