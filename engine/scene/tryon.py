@@ -367,8 +367,12 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     # (a pattern file's own layout: GarmentCode's reaches its body's hands; the catalogue's and a
     # DXF's placements start clear of the arms)
     lower = lower_labelled(spec) if pattern_file else frozenset()
-    passing = _arms_passed(body, garment, plan, request, tuning.cloth.tolerance, lower=lower) if pattern_file else None
-    arms = _hanging(body, whole=True) if pattern_file and lift is None else None
+    # (the hanging arms, and those arms whole: found once, for both of their uses)
+    arms = _hanging(body, whole=True) if pattern_file else None
+    passing = _arms_passed(body, garment, plan, request, tuning.cloth.tolerance, lower=lower,
+                           arm=arms[0] if arms is not None else None) if pattern_file else None
+    if lift is not None:  # (the trunk-side meeting needs the body's BVH, which a lift's sewing has not)
+        arms = None
     if passing is not None:
         map_info["passed_through"] = passing.why
     try:
@@ -518,17 +522,17 @@ def _hanging(body: Body, whole: bool = False):
 
 
 def _arms_passed(body: Body, garment, plan: TryOnPlan, request: TryOnOptions, tolerance: float,
-                 lower: frozenset[str] = frozenset()):
+                 lower: frozenset[str] = frozenset(), arm: np.ndarray | None = None):
     """The PassThrough (engine.collide.collider) of a garment with panels that hang wholly below
     the arms (skirts, trousers, a dress's skirt), or None: their cloth passes through the arms
     that hang beside them while the seams close and until the drape first settles, as in
     GarmentCode's own simulator (engine.body.hanging); then it meets the whole body.
     lower: panels the pattern labels a lower garment's (lower_labelled): below the arms
-    wherever their layout's top lies, if their middle is."""
+    wherever their layout's top lies, if their middle is. arm: _hanging(body), where found already."""
     if request.collision != "image" or (plan.segments is not None and not any("arm" in s for s in plan.segments)):
         return None
     armpit = _armpit_y(body)
-    arm = _hanging(body)  # (None where the armpits cannot be found)
+    arm = _hanging(body) if arm is None else arm  # (None where the armpits cannot be found)
     if arm is None:
         return None
 
