@@ -558,13 +558,17 @@ def test_fabrics_are_physical():
     for f in FABRICS.values():
         assert 0.03 < f.density < 0.6  # kg/m^2: 30 .. 600 g/m^2
         assert f.stretch > 0 and f.shear > 0 and f.bending > 0
-        assert 0 < f.friction < 1 and 0 < f.strain_threshold < 0.5
+        assert 0 < f.friction < 1 and 0 < f.strain_threshold < 1.0  # (a rib stretches to about twice its width)
     assert FABRICS["denim"].density > FABRICS["cotton"].density > FABRICS["silk"].density
     assert FABRICS["jersey"].strain_threshold > FABRICS["cotton"].strain_threshold
     # an elastane knit: easier to stretch than jersey, worn further stretched, heavier
     knit = FABRICS["stretch_knit"]
     assert knit.stretch < FABRICS["jersey"].stretch and knit.strain_threshold > FABRICS["jersey"].strain_threshold
     assert knit.density > FABRICS["jersey"].density
+    # a rib (cuffs, bands): stretches round further still, and only round
+    rib = FABRICS["rib_knit"]
+    assert rib.strain_threshold > knit.strain_threshold and rib.stretch < knit.stretch and rib.crosswise
+    assert not any(f.crosswise for f in FABRICS.values() if f is not rib)
 
 
 def test_stale_contacts_carry_the_last_answer_forward():
@@ -893,6 +897,33 @@ def test_a_part_in_another_fabric_is_held_at_its_own_limit():
     assert len(w.allow) == len(w.springs)
     st = with_stiffness(w, 0.25)
     assert st.allow is w.allow and np.array_equal(st.limit_rest, w.limit_rest)
+
+
+def test_a_rib_part_stretches_crosswise_at_its_own_springs():
+    """Fabric.crosswise (rib_knit): a part sewn from a rib takes its own springs crosswise (along
+    the panel's x, round the limb) and on the bias, far softer than the floor; lengthwise it keeps
+    ClothParams.sag_as's floor (no softer for its weight than cotton), so it does not sag."""
+    uv, cotton, seams = _two_strips()
+    rib, h = get_fabric("rib_knit"), 0.01
+    assert rib.crosswise and not get_fabric("stretch_knit").crosswise
+    panel = np.repeat([0, 1], 6)
+    quads = np.array([[0, 3, 4, 1], [1, 4, 5, 2], [6, 9, 10, 7], [7, 10, 11, 8]], dtype=np.int32)
+    m = build_model(uv, panel, np.full((12, 2), -1), quads, np.zeros((0, 3), np.int32), seams,
+                    get_fabric("cotton"), h, panel_fabrics={1: rib})
+    on_b = panel[m.springs[:, 0]] == 1
+    d = uv[m.springs[:, 1]] - uv[m.springs[:, 0]]
+    along = (m.kind == STRUCTURAL) & (np.abs(d[:, 1]) > np.abs(d[:, 0]))
+    across = (m.kind == STRUCTURAL) & ~along
+    own = spring_stiffness(m.kind, rib, replace(m.params, sag_as=None), h)
+    floor = spring_stiffness(m.kind, rib, m.params, h)
+    assert (on_b & along).any() and (on_b & across).any()
+    assert np.allclose(m.stiffness[on_b & across], own[on_b & across])
+    assert np.allclose(m.stiffness[on_b & along], floor[on_b & along])
+    assert np.allclose(m.stiffness[on_b & (m.kind == SHEAR)], own[on_b & (m.kind == SHEAR)])
+    assert m.stiffness[on_b & across].max() < 0.1 * m.stiffness[on_b & along].min()
+    assert np.allclose(m.stiffness[~on_b], cotton.stiffness[~on_b])  # (A, cotton, as it was)
+    whole = build_model(uv, panel, np.full((12, 2), -1), quads, np.zeros((0, 3), np.int32), seams, rib, h)
+    assert np.allclose(whole.stiffness[on_b], m.stiffness[on_b])  # (a garment all in rib: the same springs)
 
 
 @pytest.mark.parametrize("name", ["jersey", "stretch_knit", "denim", "silk"])

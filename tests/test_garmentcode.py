@@ -44,7 +44,7 @@ def test_the_handful_covers_what_it_says():
     names = set().union(*(_panels(p) for p in FILES))
     for part in ("wb_front", "pant_l_cuff_f", "hood", "collar_front", "ins_skirt_front", "sleeve_f", "skirt_panel"):
         assert any(n.startswith(part) or part in n for n in names), part
-    assert len(FILES) == 20
+    assert len(FILES) == 22
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name[:17])
@@ -418,6 +418,29 @@ def test_cuffs_cut_smaller_than_the_arms_are_sewn_in_a_knit():
     assert rep["penetration_mm"]["max"] <= 2.0 and rep["penetration_mm"]["p99"] <= 0.5, rep["penetration_mm"]
 
 
+@pytest.mark.integration
+def test_cuffs_too_small_for_a_stretch_knit_are_sewn_from_a_rib():
+    """f_smpl 97_010, a dress whose sleeves end on the forearm in cuffs GarmentCode cuts to the
+    wrist's girth (17.2 cm round): in cotton their seams stall beside them, and in stretch_knit
+    too (held at its 40 %, 4-6 cm open). Sewn from rib_knit (80 %, stretching crosswise at its
+    own springs) they close round the forearms and the dress fits cotton; the report names the rib
+    and the cuffs' own strain is within its threshold + 1 %."""
+    from engine.body import resolve_body
+    from engine.pattern.io import load_pattern
+    from engine.scene.tryon import run_tryon
+    from tests.samples import SMPL_BODY
+
+    spec = load_pattern(DESIGNS / "f_smpl_average_A40_97_010_specification.json")
+    res, rep = run_tryon(resolve_body(str(SMPL_BODY)), spec)
+    cuffs = {n for n in spec.pattern.panels if "cuff" in n}
+    assert rep["fabric"] == "cotton" and rep.get("panel_fabrics") == {n: "rib_knit" for n in cuffs}, \
+        rep.get("panel_fabrics")
+    assert any(w.startswith("'sl_") and "sewn from rib_knit" in w for w in rep["warnings"]), rep["warnings"]
+    assert rep["strain"]["parts"]["rib_knit"]["max"] <= 0.81, rep["strain"]
+    assert not rep["tight"] and rep["settled"], rep["strain"]
+    assert rep["penetration_mm"]["max"] <= 2.0 and rep["penetration_mm"]["p99"] <= 0.5, rep["penetration_mm"]
+
+
 @pytest.mark.slow
 @pytest.mark.integration
 def test_a_hooded_top_with_cuffs_too_small_drapes_or_names_its_cuffs():
@@ -618,3 +641,81 @@ def test_parts_held_at_the_fabrics_limit_are_sewn_from_a_knit(monkeypatch):
     named[0] = list(spec.pattern.panels)  # (every panel: the whole garment in a knit instead)
     _, rep = tryon.run_tryon(body, spec)
     assert calls == [("cotton", {}), ("jersey", {}), ("stretch_knit", {})], calls
+
+
+def test_parts_still_held_in_the_knit_are_sewn_from_a_rib(monkeypatch):
+    """Parts held in cotton and, sewn from stretch_knit, held again or stalled open round the limb
+    (a cuff cut to the wrist's girth on a sleeve that ends on the forearm: f_smpl 97_010) are sewn
+    once more from rib_knit, which stretches twice as far round; the report names the rib. Where
+    the knit parts' drape stalled elsewhere, naming no part, the rib is not tried: the whole
+    garment goes to the knits."""
+    import engine.scene.tryon as tryon
+    from engine.body import resolve_body
+    from engine.errors import SimulationError
+    from engine.pattern.io import load_pattern
+
+    calls, stalled_at = [], [["cuff_l", "sleeve_l"]]
+
+    def scripted(body, spec, request, tuning, why, panel_fabrics=None, **kw):
+        parts = dict(panel_fabrics or {})
+        calls.append((request.fabric, parts))
+        if request.fabric == "cotton" and not parts:
+            err = SimulationError("the garment is too small for this body (cotton)")
+            err.stretched_at, err.strain, err.gave_up, err.tight_panels = (0, 1, 0), 0.3, True, ["cuff_l"]
+            raise err
+        if parts.get("cuff_l") == "rib_knit":
+            return "drape", {"tight": False, "warnings": [], "fabric_why": why}
+        err = SimulationError(f"sewing stopped closing ({request.fabric})")
+        err.open_panels = stalled_at[0]
+        err.small_part = 0.3 if not parts else None  # (the knits: a part too small, on to the next)
+        raise err
+
+    monkeypatch.setattr(tryon, "_run_tryon", scripted)
+    body, spec = resolve_body(str(BODY)), load_pattern(DESIGNS / "mean_female_11_026_specification.json")
+    _, rep = tryon.run_tryon(body, spec)
+    assert calls == [("cotton", {}), ("cotton", {"cuff_l": "stretch_knit"}), ("cotton", {"cuff_l": "rib_knit"})], calls
+    assert rep["warnings"] == ["'cuff_l' sewn from rib_knit, a knit, as a maker sews a part cut smaller round than "
+                               "the body (a rib cuff or band): in cotton it stayed 30 % stretched where cotton "
+                               "allows 5 %"], rep["warnings"]
+    calls.clear()
+    stalled_at[0] = ["skirt_front", "skirt_back"]  # (the knit cuff's drape stalled elsewhere)
+    with pytest.raises(SimulationError):
+        tryon.run_tryon(body, spec)
+    assert [c[0] for c in calls] == ["cotton", "cotton", "jersey", "stretch_knit"], calls
+    assert all(parts.get("cuff_l") != "rib_knit" for _, parts in calls), calls
+
+
+def test_a_skirt_alone_is_judged_by_its_waist():
+    """A circle skirt alone whose two panels GarmentCode lays out in a ring reaching past the
+    shoulders (f_smpl 109_013): whether it slid or fell off the shoulders is judged by its waist
+    (the attachment holds it), not by the ring's top, which falls by design (it was reported as
+    "fell off the shoulders" while it hung at the waist). A dress keeps its bodice as the judged
+    part."""
+    from engine.body import resolve_body
+    from engine.garment.garment import build_garment
+    from engine.garment.place import pattern_placement
+    from engine.pattern.io import load_pattern
+    from engine.scene.tryon import _world_height, fell_off, judged_part, lower_labelled
+    from tests.samples import SMPL_BODY
+
+    body = resolve_body(str(SMPL_BODY))
+    spec = load_pattern(DESIGNS / "f_smpl_average_A40_109_013_specification.json")
+    place, _ = pattern_placement(spec, body, lambda p: np.zeros(len(p), bool))
+    g = build_garment(spec, h=0.015, place=place)
+    lower = lower_labelled(spec)
+    assert lower == set(spec.pattern.panels)
+    judged = judged_part(g, lower)
+    waist = g.labelled["lower_interface"]
+    assert judged.sum() == len(np.unique(waist)) and judged[waist].all()
+    y, shoulders = g.positions[:, 1], _world_height(body, "shoulder_height")
+    assert y.max() > shoulders > y[judged].max() + 0.2, (y.max(), shoulders, y[judged].max())
+    # the ring falls to hang from the waist, the waist held: not "fell off the shoulders" -- as
+    # the whole garment judged, it would be
+    draped = g.positions.copy()
+    draped[~judged, 1] = np.minimum(draped[~judged, 1], y[judged].min())
+    assert fell_off(g.positions[judged], draped[judged], shoulders, same=True) is None
+    assert fell_off(g.positions, draped, shoulders) is not None
+    dress = load_pattern(DESIGNS / "mean_female_83_010_specification.json")
+    gd = build_garment(dress, h=0.015)
+    skirt = lower_labelled(dress)
+    assert skirt and np.array_equal(judged_part(gd, skirt), ~np.isin(gd.panel_names, list(skirt))[gd.panel])

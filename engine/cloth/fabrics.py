@@ -43,6 +43,14 @@ Sources (typical values; real bolts vary by +-30 %):
   be worn 30-50 % stretched (comfort stretch: under 30 %; K. L. Hatch, "Textile Science", 1993,
   on stretch fabrics). Leggings cut 16-18 % under the hips stretch 19-22 % round them on average
   and more where the body curves (seat, calf), so its threshold is 40 %.
+- Rib knit, `rib_knit`: the cuffs, waistbands and neckbands of knitwear and sweatshirts. A 1x1
+  rib's wales close up when relaxed, so it stretches crosswise to about twice its width and
+  recovers (sewing suppliers' ribbing guides ask for 75-100 % crosswise stretch); a band is cut
+  a quarter to a third shorter than the opening it is sewn into and stretched over the hand or
+  hips to go on, so it is worn 30-80 % stretched: its threshold is 80 %. With elastane,
+  220-300 g/m^2. The try-on sews from it the parts of a pattern file cut smaller round than the
+  body where they stay too tight in stretch_knit (engine.scene.tryon.RIB_KNIT), as a maker does.
+  It stretches crosswise only (`Fabric.crosswise`): lengthwise its springs keep the floor below.
 
 The simulation uses the measured stretch and shear stiffness times `ClothParams.stiffness_scale`
 (default 0.03): the velocity modification caps the strain at the threshold, which is the point of
@@ -77,6 +85,9 @@ class Fabric:
     # degrees: the in-plane shear the strain limit lets a quad's diagonals take (see the module doc;
     # 0: none -- the diagonals held at the stretch threshold, as every preset is for now)
     shear_lock: float = 0.0
+    # stretches crosswise only (a rib: its wales close up across it, its loops hold along it): its
+    # lengthwise springs keep ClothParams.sag_as's floor, its crosswise ones are its own
+    crosswise: bool = False
     note: str = ""
 
 
@@ -93,6 +104,9 @@ FABRICS: dict[str, Fabric] = {
                friction=0.50, strain_threshold=0.15, note="cotton single jersey knit, 180 g/m^2"),
         Fabric("stretch_knit", density=0.230, stretch=490 / 0.80, shear=0.2 * G_UNIT, bending=0.03 * GF_CM2_PER_CM,
                friction=0.50, strain_threshold=0.40, note="cotton or nylon/elastane jersey (leggings), 230 g/m^2"),
+        Fabric("rib_knit", density=0.260, stretch=490 / 1.20, shear=0.2 * G_UNIT, bending=0.05 * GF_CM2_PER_CM,
+               friction=0.50, strain_threshold=0.80, crosswise=True,
+               note="1x1 cotton/elastane rib (cuffs, bands), 260 g/m^2"),
     )
 }
 

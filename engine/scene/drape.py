@@ -583,6 +583,7 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
     err.positions, err.triangles = state.x.copy(), _triangles(model)  # for a picture
     op = garment.seams[~welded]
     err.open_points = 0.5 * (state.x[op[:, 0]] + state.x[op[:, 1]])  # (where they lie: tryon's hints)
+    err.open_panels = sorted({garment.panel_names[p] for p in np.unique(garment.panel[op.ravel()])})
     err.too_small = True  # (engine.scene.garments.add_size_hint)
     # where the open seams were placed (engine.scene.garments.arms_in_the_way)
     err.open_top = float(garment.positions[op.ravel(), 1].max())

@@ -17,10 +17,11 @@ class TryOnOptions(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    fabric: str | None = Field(None, description="cotton, denim, silk, jersey or stretch_knit (elastane jersey: "
-                               "leggings); default: the pattern's own -- a DXF of a stretch knit garment suggests "
-                               "stretch_knit -- else cotton (a pattern file whose cuffs or bands are cut smaller "
-                               "round than the body is draped again with those parts in stretch_knit; one too "
+    fabric: str | None = Field(None, description="cotton, denim, silk, jersey, stretch_knit (elastane jersey: "
+                               "leggings) or rib_knit (cuffs and bands); default: the pattern's own -- a DXF of a "
+                               "stretch knit garment suggests stretch_knit -- else cotton (a pattern file whose cuffs "
+                               "or bands are cut smaller round than the body is draped again with those parts in "
+                               "rib_knit; one too "
                                "tight in cotton as a whole, cut with no ease, in jersey, and if too tight in "
                                "jersey too, in stretch_knit)")
     resolution_cm: float = Field(1.5, ge=0.2, le=20.0, description="cloth edge length, cm")

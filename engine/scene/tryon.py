@@ -142,7 +142,10 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     a hood cut smaller round than the arm, waist or head), together at most PART_SHARE of the
     garment's cloth (more: the garment as a whole is cut for a knit), it is
     draped again with those parts in PART_KNIT -- as a maker sews a cuff or band from a rib
-    knit -- and, where that names parts again, once more with those added. If none fits, the
+    knit -- and, where that names parts again, once more with those added; where the last names
+    only parts already in PART_KNIT, once more with them in RIB_KNIT (a rib stretches twice as far
+    round; GarmentCode cuts some cuffs to the wrist's girth on sleeves that end on the forearm).
+    If none fits, the
     first fabric's drape or the stretchiest knit's (tight, noted) or the first's refusal stands."""
     request, fabric_why = with_fabric(request, spec)
     kw = dict(place=place, source=source, progress=progress, observer=observer, lift=lift)
@@ -170,15 +173,24 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     parts: dict[str, str] = {}
     out = first
     areas = _panel_areas(spec)
-    for _ in range(PART_ROUNDS):
-        named = [n for n in _tight_parts(out) if n not in parts]
-        if not named or sum(areas.get(n, 0.0) for n in [*parts, *named]) > PART_SHARE * sum(areas.values()):
+    for k in range(PART_ROUNDS + 1):
+        held = _tight_parts(out)
+        named = [n for n in held if n not in parts]
+        if k == PART_ROUNDS:  # (the parts held in PART_KNIT too, or stalled open, and no others: in a rib)
+            if not parts or named or not (held or set(getattr(out, "open_panels", ())) & set(parts)):
+                break
+            knit, parts = RIB_KNIT, {n: RIB_KNIT for n in parts}
+        elif not named:
+            continue  # (the parts held again, or no parts: the rib, or the knits below)
+        else:
+            knit = PART_KNIT
+            parts.update({n: PART_KNIT for n in named})
+        if sum(areas.get(n, 0.0) for n in parts) > PART_SHARE * sum(areas.values()):
             break  # (most of the garment held: it is a garment for a knit, below)
-        parts.update({n: PART_KNIT for n in named})
-        say("sewing", 0.0, f"{said[0]}: draping it again with {_listed(parts)} in {PART_KNIT}, a knit")
+        say("sewing", 0.0, f"{said[0]}: draping it again with {_listed(parts)} in {knit}, a knit")
         out = attempt(request, quick, fabric_why, parts)
         if _fits(out):
-            out[1]["warnings"].append(f"{_listed(parts)} sewn from {PART_KNIT}, a knit, as a maker sews a part "
+            out[1]["warnings"].append(f"{_listed(parts)} sewn from {knit}, a knit, as a maker sews a part "
                                       f"cut smaller round than the body (a rib cuff or band): {said[0]}")
             return out
     tried = []  # (fabric, result or error) of each knit
@@ -224,6 +236,7 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
 
 
 PART_KNIT = "stretch_knit"  # the fabric of the parts run_tryon finds held at the first fabric's limit
+RIB_KNIT = "rib_knit"  # ... and of those parts where they are held in PART_KNIT too
 PART_ROUNDS = 2  # drapes with more such parts in it at most
 PART_SHARE = 0.25  # ... and those parts at most this share of the garment's cloth (cuffs, bands, a hood)
 
@@ -401,7 +414,7 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     placed[:, 1] = np.maximum(placed[:, 1], floor)
     # (a lower garment's panels laid out in rings above the waist -- over the head -- fall by
     # design: where the pattern has others, those say whether it slid or fell off the shoulders)
-    judged = ~np.isin(garment.panel_names, list(lower))[garment.panel] if pattern_file else None
+    judged = judged_part(garment, lower) if pattern_file else None
     shift = hang_shift(placed, res.positions, res.vertex_map, judged)
     areas = _panel_areas(spec)
     shrunk = shortest_panel(garment, res, placed,
@@ -505,6 +518,20 @@ EXEMPT_AXIS = 0.4  # m: ... all of it that lies this near the body's vertical ax
 # rose to 1.37 m: its side seams caught on the arms)
 EXEMPT_TOP = 90
 LOWER_LABEL = "leg"  # GarmentCode's segmentation label of a lower garment's panels (its meta_garment)
+
+
+def judged_part(garment, lower: frozenset[str]) -> np.ndarray:
+    """(placed vertices,) bool: the cloth whose top and bulk say whether a pattern file's drape
+    slid or fell off the shoulders -- the panels not labelled a lower garment's (lower_labelled:
+    a skirt laid out in a ring above its head falls by design); where every panel is, a skirt or
+    trousers alone, its waist ('lower_interface', which the attachment holds: f_smpl 109_013's
+    circle skirt, laid out reaching past the shoulders and hanging at the waist, had "fallen off
+    the shoulders" and "slid 38 cm"); all False where it has none."""
+    judged = ~np.isin(garment.panel_names, list(lower))[garment.panel]
+    waist = garment.labelled.get("lower_interface")
+    if not judged.any() and waist is not None and len(waist):
+        judged[waist] = True
+    return judged
 
 
 def lower_labelled(spec: PatternSpec) -> frozenset[str]:
