@@ -229,6 +229,7 @@ def drape_cmd(request, body: str = typer.Option(..., "--body", help=BODY_HELP),
             except SimulationError as e:
                 _failed_picture(out, b, e)
                 raise
+        (out / "failed.png").unlink(missing_ok=True)  # (an earlier failure's picture, not this drape's)
         for p in write_outputs(out, b, res, report):
             typer.echo(str(p))
         r = report

@@ -3,7 +3,8 @@ DESIGN.md: metres, Y up, facing +Z, feet on y = 0, centred on x = z = 0 (boundin
 
 Units come from a plausible human height (metres, dm, cm, mm or inches; an adult's where two fit); the up axis from the shape (standing human: the long
 axis; the end with the flat soles is down); the front from the feet (toes point forward) and the
-face. Messy scans are repaired (duplicate vertices merged, degenerate faces and tiny floating
+face; a body standing turned about the vertical (5-45 degrees off the file's axes) is turned back
+square, its depth the horizontal direction of least spread. Messy scans are repaired (duplicate vertices merged, degenerate faces and tiny floating
 bits dropped, holes closed, a floor plate under the feet dropped) and every decision is
 written to Body.notes.
 
@@ -76,6 +77,15 @@ def load_body_file(path, up: str | None = None, front: str | None = None,
     rot = _rotation(up_ax, front_ax)
     world = (vertices @ rot.T) * scale
     world, faces = _drop_floor(world, faces, notes)
+    turn = _facing_turn(world, faces)
+    if turn is not None:  # (a scan of someone standing turned on the turntable: face +Z square)
+        c, s_ = np.cos(-turn), np.sin(-turn)  # (about +Y by -turn: the depth axis onto +Z)
+        yaw = np.array([[c, 0.0, s_], [0.0, 1.0, 0.0], [-s_, 0.0, c]])
+        world = world @ yaw.T
+        rot = yaw @ rot
+        notes.append(f"turned {np.degrees(-turn):+.0f} degrees about the vertical: the body stood turned "
+                     f"{abs(np.degrees(turn)):.0f} degrees from the file's {_axis_name(front_ax)} axis "
+                     "(its shoulders' line square to the front now)")
     # Feet on y = 0, centred on x = z = 0 (bounding-box centre).
     lo, hi = world.min(axis=0), world.max(axis=0)
     shift = np.array([-(lo[0] + hi[0]) / 2, -lo[1], -(lo[2] + hi[2]) / 2])
@@ -438,6 +448,30 @@ def _detect_front(v: np.ndarray, f: np.ndarray, up_ax, notes: list[str]):
         notes.append(f"front {'+' if sign > 0 else '-'}{'xyz'[depth]} guessed with low confidence "
                      "(no clear feet or face cue); pass --front if the result looks wrong")
     return (depth, sign)
+
+
+TURN_MIN = np.radians(5.0)  # a body turned less than this about the vertical is left as it stands
+TURN_WIDER = 1.3  # ... and turned only where its side-to-side spread is this x its front-to-back one
+
+
+def _facing_turn(world: np.ndarray, f: np.ndarray) -> float | None:
+    """How far a body stands turned about the vertical from the front axis (radians: its depth
+    axis's angle from +Z toward +X; load_body_file turns it back): the horizontal direction of
+    least area-weighted spread is its depth (shoulders, arms and hips spread side to side). None where it is within
+    TURN_MIN already or the spread gives no clear direction (TURN_WIDER). Measured on the sample
+    scan turned 30 degrees: the shirt placed square to the file's axis stalled with a sleeve
+    across the chest."""
+    c, w = _area_stats(world, f)
+    xz = c[:, [0, 2]] - (c[:, [0, 2]] * w[:, None]).sum(axis=0)
+    cov = (xz * w[:, None]).T @ xz
+    val, vec = np.linalg.eigh(cov)  # ascending: vec[:, 0] the least spread (front to back)
+    if not (val[0] > 0 and val[1] >= TURN_WIDER ** 2 * val[0]):
+        return None
+    dx, dz = vec[:, 0]
+    if dz < 0:
+        dx, dz = -dx, -dz  # (the front stays the side the file's front axis named)
+    turn = float(np.arctan2(dx, dz))  # the depth axis's angle from +Z, toward +X
+    return turn if TURN_MIN <= abs(turn) <= np.pi / 4 else None
 
 
 def _rotation(up_ax, front_ax) -> np.ndarray:

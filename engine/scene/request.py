@@ -21,7 +21,7 @@ class TryOnOptions(BaseModel):
                                "leggings) or rib_knit (cuffs and bands); default: the pattern's own -- a DXF of a "
                                "stretch knit garment suggests stretch_knit -- else cotton (a pattern file whose cuffs "
                                "or bands are cut smaller round than the body is draped again with those parts in "
-                               "rib_knit; one too "
+                               "stretch_knit, and where still too small, in rib_knit; one too "
                                "tight in cotton as a whole, cut with no ease, in jersey, and if too tight in "
                                "jersey too, in stretch_knit)")
     resolution_cm: float = Field(1.5, ge=0.2, le=20.0, description="cloth edge length, cm")
