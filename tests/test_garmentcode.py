@@ -646,7 +646,8 @@ def test_parts_held_at_the_fabrics_limit_are_sewn_from_a_knit(monkeypatch):
 def test_parts_still_held_in_the_knit_are_sewn_from_a_rib(monkeypatch):
     """Parts held in cotton and, sewn from stretch_knit, held again or stalled open round the limb
     (a cuff cut to the wrist's girth on a sleeve that ends on the forearm: f_smpl 97_010) are sewn
-    once more from rib_knit, which stretches twice as far round; the report names the rib. Where
+    once more from rib_knit, which stretches twice as far round, the parts that fitted staying in
+    stretch_knit; the report names each part's fabric. Where
     the knit parts' drape stalled elsewhere, naming no part, the rib is not tried: the whole
     garment goes to the knits."""
     import engine.scene.tryon as tryon
@@ -661,7 +662,7 @@ def test_parts_still_held_in_the_knit_are_sewn_from_a_rib(monkeypatch):
         calls.append((request.fabric, parts))
         if request.fabric == "cotton" and not parts:
             err = SimulationError("the garment is too small for this body (cotton)")
-            err.stretched_at, err.strain, err.gave_up, err.tight_panels = (0, 1, 0), 0.3, True, ["cuff_l"]
+            err.stretched_at, err.strain, err.gave_up, err.tight_panels = (0, 1, 0), 0.3, True, ["cuff_l", "band"]
             raise err
         if parts.get("cuff_l") == "rib_knit":
             return "drape", {"tight": False, "warnings": [], "fabric_why": why}
@@ -673,10 +674,12 @@ def test_parts_still_held_in_the_knit_are_sewn_from_a_rib(monkeypatch):
     monkeypatch.setattr(tryon, "_run_tryon", scripted)
     body, spec = resolve_body(str(BODY)), load_pattern(DESIGNS / "mean_female_11_026_specification.json")
     _, rep = tryon.run_tryon(body, spec)
-    assert calls == [("cotton", {}), ("cotton", {"cuff_l": "stretch_knit"}), ("cotton", {"cuff_l": "rib_knit"})], calls
-    assert rep["warnings"] == ["'cuff_l' sewn from rib_knit, a knit, as a maker sews a part cut smaller round than "
-                               "the body (a rib cuff or band): in cotton it stayed 30 % stretched where cotton "
-                               "allows 5 %"], rep["warnings"]
+    knit = {"cuff_l": "stretch_knit", "band": "stretch_knit"}
+    # (only the cuff, stalled open at, goes to the rib: the band fitted in stretch_knit)
+    assert calls == [("cotton", {}), ("cotton", knit), ("cotton", {**knit, "cuff_l": "rib_knit"})], calls
+    assert rep["warnings"] == ["'cuff_l' sewn from rib_knit, a knit, and 'band' sewn from stretch_knit, a knit, as "
+                               "a maker sews a part cut smaller round than the body (a rib cuff or band): in cotton "
+                               "it stayed 30 % stretched where cotton allows 5 %"], rep["warnings"]
     calls.clear()
     stalled_at[0] = ["skirt_front", "skirt_back"]  # (the knit cuff's drape stalled elsewhere)
     with pytest.raises(SimulationError):

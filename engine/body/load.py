@@ -3,7 +3,7 @@ DESIGN.md: metres, Y up, facing +Z, feet on y = 0, centred on x = z = 0 (boundin
 
 Units come from a plausible human height (metres, dm, cm, mm or inches; an adult's where two fit); the up axis from the shape (standing human: the long
 axis; the end with the flat soles is down); the front from the feet (toes point forward) and the
-face; a body standing turned about the vertical (5-45 degrees off the file's axes) is turned back
+face; a body standing turned about the vertical (10-45 degrees off the file's axes) is turned back
 square, its depth the horizontal direction of least spread. Messy scans are repaired (duplicate vertices merged, degenerate faces and tiny floating
 bits dropped, holes closed, a floor plate under the feet dropped) and every decision is
 written to Body.notes.
@@ -450,20 +450,34 @@ def _detect_front(v: np.ndarray, f: np.ndarray, up_ax, notes: list[str]):
     return (depth, sign)
 
 
-TURN_MIN = np.radians(5.0)  # a body turned less than this about the vertical is left as it stands
-TURN_WIDER = 1.3  # ... and turned only where its side-to-side spread is this x its front-to-back one
+TURN_MIN = np.radians(10.0)  # a body turned less than this about the vertical is left as it stands (an
+# arm swung forward or a stride still skews the trunk's spread by a few degrees)
+TURN_WIDER = 1.3  # ... and turned only where its trunk's side-to-side spread is this x its front-to-back one
+TURN_BAND = (0.5, 0.75)  # the trunk: this share of the height up from the soles (hips to shoulders) ...
+TURN_RADIUS = 0.3  # m: ... within this of its middle (the shoulders and upper arms, not the hands)
 
 
 def _facing_turn(world: np.ndarray, f: np.ndarray) -> float | None:
     """How far a body stands turned about the vertical from the front axis (radians: its depth
     axis's angle from +Z toward +X; load_body_file turns it back): the horizontal direction of
-    least area-weighted spread is its depth (shoulders, arms and hips spread side to side). None where it is within
+    least area-weighted spread of its trunk (TURN_BAND, TURN_RADIUS: hips to shoulders, not the
+    legs or hands, which a stride or a swing turns) is its depth. None where it is within
     TURN_MIN already or the spread gives no clear direction (TURN_WIDER). Measured on the sample
     scan turned 30 degrees: the shirt placed square to the file's axis stalled with a sleeve
     across the chest."""
     c, w = _area_stats(world, f)
-    xz = c[:, [0, 2]] - (c[:, [0, 2]] * w[:, None]).sum(axis=0)
-    cov = (xz * w[:, None]).T @ xz
+    # the trunk, hips to shoulders: a stride, or a hand swung forward or held out, would skew it
+    lo, hi = c[:, 1].min(), c[:, 1].max()
+    band = (c[:, 1] > lo + TURN_BAND[0] * (hi - lo)) & (c[:, 1] < lo + TURN_BAND[1] * (hi - lo))
+    if not band.any() or w[band].sum() <= 0:
+        return None
+    mid = (c[band][:, [0, 2]] * w[band, None]).sum(axis=0) / w[band].sum()
+    band &= np.linalg.norm(c[:, [0, 2]] - mid, axis=1) < TURN_RADIUS
+    if not band.any() or w[band].sum() <= 0:
+        return None
+    xz, wb = c[band][:, [0, 2]], w[band] / w[band].sum()
+    xz = xz - (xz * wb[:, None]).sum(axis=0)
+    cov = (xz * wb[:, None]).T @ xz
     val, vec = np.linalg.eigh(cov)  # ascending: vec[:, 0] the least spread (front to back)
     if not (val[0] > 0 and val[1] >= TURN_WIDER ** 2 * val[0]):
         return None

@@ -50,7 +50,7 @@ Sources (typical values; real bolts vary by +-30 %):
   hips to go on, so it is worn 30-80 % stretched: its threshold is 80 %. With elastane,
   220-300 g/m^2. The try-on sews from it the parts of a pattern file cut smaller round than the
   body where they stay too tight in stretch_knit (engine.scene.tryon.RIB_KNIT), as a maker does.
-  It stretches crosswise only (`Fabric.crosswise`): lengthwise its springs keep the floor below.
+  It is soft crosswise only (`Fabric.crosswise`): lengthwise its springs keep the floor below.
 
 The simulation uses the measured stretch and shear stiffness times `ClothParams.stiffness_scale`
 (default 0.03): the velocity modification caps the strain at the threshold, which is the point of
@@ -85,8 +85,9 @@ class Fabric:
     # degrees: the in-plane shear the strain limit lets a quad's diagonals take (see the module doc;
     # 0: none -- the diagonals held at the stretch threshold, as every preset is for now)
     shear_lock: float = 0.0
-    # stretches crosswise only (a rib: its wales close up across it, its loops hold along it): its
-    # lengthwise springs keep ClothParams.sag_as's floor, its crosswise ones are its own
+    # soft crosswise only (a rib: its wales close up across it, its loops hold along it): its
+    # lengthwise springs keep ClothParams.sag_as's floor, its crosswise and bias ones are its own
+    # (the strain limit, its threshold, is the same both ways)
     crosswise: bool = False
     note: str = ""
 

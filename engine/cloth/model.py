@@ -393,7 +393,7 @@ def _gathered(springs: np.ndarray, rest: np.ndarray, seams: np.ndarray) -> np.nd
 
 def _stiffness(kind: np.ndarray, d: np.ndarray, fabric: Fabric, params: ClothParams, h: float) -> np.ndarray:
     """spring_stiffness of springs along d (their rest vectors in the panel's frame), for a fabric
-    that stretches crosswise only (Fabric.crosswise: a rib) -- crosswise, along the panel's x (round
+    that is soft crosswise only (Fabric.crosswise: a rib) -- crosswise, along the panel's x (round
     the limb or waist: GarmentCode draws a band or cuff so, the DXF reader turns a piece's grain
     line vertical), and on the bias at its own springs; lengthwise, no softer for its weight than
     ClothParams.sag_as. At the floor crosswise too, a rib cuff 17 cm round pushed back harder than

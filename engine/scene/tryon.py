@@ -143,8 +143,9 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     garment's cloth (more: the garment as a whole is cut for a knit), it is
     draped again with those parts in PART_KNIT -- as a maker sews a cuff or band from a rib
     knit -- and, where that names parts again, once more with those added; where the last names
-    only parts already in PART_KNIT, once more with them in RIB_KNIT (a rib stretches twice as far
-    round; GarmentCode cuts some cuffs to the wrist's girth on sleeves that end on the forearm).
+    no new parts but held those in PART_KNIT again, or its seams stalled open at them, once more
+    with those in RIB_KNIT (a rib stretches twice as far round; GarmentCode cuts some cuffs to the
+    wrist's girth on sleeves that end on the forearm), the others kept in PART_KNIT.
     If none fits, the
     first fabric's drape or the stretchiest knit's (tight, noted) or the first's refusal stands."""
     request, fabric_why = with_fabric(request, spec)
@@ -177,9 +178,10 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
         held = _tight_parts(out)
         named = [n for n in held if n not in parts]
         if k == PART_ROUNDS:  # (the parts held in PART_KNIT too, or stalled open, and no others: in a rib)
-            if not parts or named or not (held or set(getattr(out, "open_panels", ())) & set(parts)):
+            rib = set(held) | (set(getattr(out, "open_panels", ())) & set(parts))
+            if not parts or named or not rib:
                 break
-            knit, parts = RIB_KNIT, {n: RIB_KNIT for n in parts}
+            knit, parts = RIB_KNIT, {n: RIB_KNIT if n in rib else f for n, f in parts.items()}
         elif not named:
             continue  # (the parts held again, or no parts: the rib, or the knits below)
         else:
@@ -187,11 +189,11 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
             parts.update({n: PART_KNIT for n in named})
         if sum(areas.get(n, 0.0) for n in parts) > PART_SHARE * sum(areas.values()):
             break  # (most of the garment held: it is a garment for a knit, below)
-        say("sewing", 0.0, f"{said[0]}: draping it again with {_listed(parts)} in {knit}, a knit")
+        say("sewing", 0.0, f"{said[0]}: draping it again with {_in_fabrics(parts)}")
         out = attempt(request, quick, fabric_why, parts)
         if _fits(out):
-            out[1]["warnings"].append(f"{_listed(parts)} sewn from {knit}, a knit, as a maker sews a part "
-                                      f"cut smaller round than the body (a rib cuff or band): {said[0]}")
+            out[1]["warnings"].append(f"{_in_fabrics(parts, 'sewn from')}, as a maker sews a part cut smaller "
+                                      f"round than the body (a rib cuff or band): {said[0]}")
             return out
     tried = []  # (fabric, result or error) of each knit
     # the first fabric's drape to its end where it gave up short of its own refusal mark (a drape
@@ -237,7 +239,7 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
 
 PART_KNIT = "stretch_knit"  # the fabric of the parts run_tryon finds held at the first fabric's limit
 RIB_KNIT = "rib_knit"  # ... and of those parts where they are held in PART_KNIT too
-PART_ROUNDS = 2  # drapes with more such parts in it at most
+PART_ROUNDS = 2  # drapes with more such parts in PART_KNIT at most (then at most one with some in RIB_KNIT)
 PART_SHARE = 0.25  # ... and those parts at most this share of the garment's cloth (cuffs, bands, a hood)
 
 
@@ -252,6 +254,15 @@ def _panel_areas(spec: PatternSpec) -> dict[str, float]:
 def _tight_parts(out) -> list[str]:
     """The panels a drape (run_tryon's attempt: (result, report) or error) held at its fabric's limit."""
     return list(getattr(out, "tight_panels", None) or []) if isinstance(out, Exception) else list(out[0].held)
+
+
+def _in_fabrics(parts: dict[str, str], verb: str = "in") -> str:
+    """The parts by fabric, in words: "'cuff_l', 'cuff_r' sewn from rib_knit, a knit, and
+    'hood' sewn from stretch_knit, a knit" (verb "in": "... in rib_knit, a knit")."""
+    by: dict[str, list[str]] = {}
+    for n, f in parts.items():
+        by.setdefault(f, []).append(n)
+    return ", and ".join(f"{_listed(dict.fromkeys(ns))} {verb} {f}, a knit" for f, ns in by.items())
 
 
 def _listed(parts: dict) -> str:
