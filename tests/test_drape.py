@@ -1145,12 +1145,20 @@ def test_a_crotch_seam_left_open_under_the_body_names_a_rise_too_short():
     def said(reach: float, at: np.ndarray = x):
         uv = np.array([[0.0, 0.0], [0.0, reach], [0.0, 0.0], [0.0, reach]])
         garment = SimpleNamespace(panel=np.array([0, 0, 1, 1]), uv=uv, seams=np.array([[0, 2]]))
-        return _crotch_short(SimpleNamespace(body=bvh, garment=garment), SimpleNamespace(x=at), np.zeros(1, bool))
+        return _crotch_short(SimpleNamespace(body=bvh, garment=garment), SimpleNamespace(x=at), np.zeros(1, bool))[0]
 
     short = said(0.25)
     assert short is not None and "at most 50 cm of cloth" in short and "rise is too short" in short, short
     body_cm = float(re.search(r"the body measures (\d+) cm", short).group(1))
     assert 70 <= body_cm <= 90, short
+    # how far lower the tops must hang for 50 cm of cloth to reach round: the body's outline
+    # from there is 50 cm (at most 2 mm off), and from higher it is longer
+    from engine.scene.drape import _crotch_length, crotch_fit_drop
+
+    drop = crotch_fit_drop(bvh.verts, bvh.faces, 0.50, 1.07, xc, 0.3)
+    assert drop is not None and 0.05 < drop < 0.3, drop
+    assert abs(_crotch_length(bvh.verts, bvh.faces, xc, 1.07 - drop)[0] - 0.50) < 0.002
+    assert crotch_fit_drop(bvh.verts, bvh.faces, 0.10, 1.07, xc, 0.05) is None  # (not within 5 cm)
     assert said(0.45) is None
     aside = x.copy()
     aside[[0, 2], 0] += 0.15  # (the pair beside a thigh, not under the crotch)

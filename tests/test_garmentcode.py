@@ -44,7 +44,7 @@ def test_the_handful_covers_what_it_says():
     names = set().union(*(_panels(p) for p in FILES))
     for part in ("wb_front", "pant_l_cuff_f", "hood", "collar_front", "ins_skirt_front", "sleeve_f", "skirt_panel"):
         assert any(n.startswith(part) or part in n for n in names), part
-    assert len(FILES) == 22
+    assert len(FILES) == 23
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name[:17])
@@ -722,3 +722,26 @@ def test_a_skirt_alone_is_judged_by_its_waist():
     gd = build_garment(dress, h=0.015)
     skirt = lower_labelled(dress)
     assert skirt and np.array_equal(judged_part(gd, skirt), ~np.isin(gd.panel_names, list(skirt))[gd.panel])
+
+
+@pytest.mark.integration
+def test_trousers_whose_rise_is_short_are_worn_lower():
+    """f_smpl 127_009, culottes GarmentCode drafts with a rise of 60 cm through the crotch, placed
+    with their top 2.6 cm under f_smpl's waist where the body measures 87 cm through its crotch:
+    their crotch seams stalled 6 cm open. Placed 13 cm lower -- where the rise reaches round, as a
+    wearer would wear them -- they sew and drape in cotton, and the report says how they were
+    placed."""
+    from engine.body import resolve_body
+    from engine.pattern.io import load_pattern
+    from engine.scene.tryon import run_tryon
+    from tests.samples import SMPL_BODY
+
+    said = []
+    res, rep = run_tryon(resolve_body(str(SMPL_BODY)), load_pattern(DESIGNS / "f_smpl_average_A40_127_009_specification.json"),
+                         progress=lambda stage, f, msg: said.append(msg))
+    assert any(m.startswith("the rise is too short for where the top was placed: sewing it again") for m in said)
+    m = re.search(r"lowered (\d+) cm: its rise, (\d+) cm through the crotch, is shorter than the body's (\d+) cm",
+                  json.dumps(rep))
+    assert m and 5 <= int(m.group(1)) <= 15 and int(m.group(2)) < int(m.group(3)), m
+    assert rep["fabric"] == "cotton" and rep["settled"] and not rep["tight"], (rep["fabric"], rep["strain"])
+    assert rep["penetration_mm"]["max"] <= 2.0 and rep["penetration_mm"]["p99"] <= 0.5, rep["penetration_mm"]

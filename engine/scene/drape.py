@@ -574,12 +574,14 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
             f"{100 * gave_up[1]:.1f}-{100 * gave_up[2]:.1f} cm for {t.snap_stall:.1f} s)")
     again = f" (sewn twice, pulled at {pulls[0]:g} and {pulls[-1]:g} m/s)" if len(pulls) > 1 else ""
     small = _too_small_panels(job, model, state, welded)
-    crotch = _crotch_short(job, state, welded)
+    crotch, short = _crotch_short(job, state, welded)
     why = (crotch if crotch else f"{small[0]}: that part is too small for this body (try a larger size)" if small else
            OPEN_WHY)
     err = SimulationError(f"sewing {when}{again}; open seams: {names}. {why}")
     if small and not crotch:  # (a fit, not the sewing: engine.scene.tryon drapes it in a stretchier knit)
         err.small_part, err.tight_panels = small[1], small[2]
+    if crotch:  # (reach m, the tops' height m, the body's centre x: tryon lowers the garment to fit)
+        err.crotch = short
     err.positions, err.triangles = state.x.copy(), _triangles(model)  # for a picture
     op = garment.seams[~welded]
     err.open_points = 0.5 * (state.x[op[:, 0]] + state.x[op[:, 1]])  # (where they lie: tryon's hints)
@@ -656,15 +658,29 @@ def _crotch_length(verts: np.ndarray, faces: np.ndarray, xc: float, top: float) 
                key=lambda r: r[0] if r[0] > 0 else np.inf)
 
 
-def _crotch_short(job: _Dressing, state: ClothState, welded: np.ndarray) -> str | None:
+def crotch_fit_drop(verts: np.ndarray, faces: np.ndarray, reach: float, y_top: float, xc: float,
+                    most: float) -> float | None:
+    """How far (m) a lower garment whose cloth reaches `reach` through the crotch from tops at
+    y_top must hang lower for the body's outline through its crotch from there to be no longer
+    than that (_crotch_length; bisection); None where even `most` lower is not enough."""
+    if _crotch_length(verts, faces, xc, y_top - most)[0] > reach:
+        return None
+    lo, hi = 0.0, most
+    for _ in range(20):
+        m = 0.5 * (lo + hi)
+        lo, hi = (m, hi) if _crotch_length(verts, faces, xc, y_top - m)[0] > reach else (lo, m)
+    return hi
+
+
+def _crotch_short(job: _Dressing, state: ClothState, welded: np.ndarray) -> tuple[str | None, tuple | None]:
     """Where open pairs meet under the body's crotch (within CROTCH_NEAR of its centre plane and
     CROTCH_BELOW of its lowest point there, one end in front and one behind), whether the cloth
     can reach round it: the flat distance from each side's point up its panel to that panel's top
     (where it is held), front and back together, against the body's outline through the crotch
     from the height the tops hang at. A rise shorter than CROTCH_SHORT of it is named, with both
-    lengths; else None."""
+    lengths, and (reach m, the tops' height m, the body's centre x); else (None, None)."""
     if job.body is None:
-        return None
+        return None, None
     g, x = job.garment, state.x
     verts, faces = job.body.verts, job.body.faces
     xc = float(np.median(verts[:, 0]))
@@ -672,16 +688,16 @@ def _crotch_short(job: _Dressing, state: ClothState, welded: np.ndarray) -> str 
     mid = 0.5 * (x[pairs[:, 0]] + x[pairs[:, 1]])
     near = np.abs(mid[:, 0] - xc) < CROTCH_NEAR
     if not near.any():
-        return None
+        return None, None
     _, low = _crotch_length(verts, faces, xc, float(mid[near, 1].max()) + CROTCH_BELOW)
     if not np.isfinite(low):
-        return None
+        return None, None
     # (a pair from the front to the back, under it: not a skirt's centre seam, open in front)
     by = (np.abs(verts[:, 1] - low) < 0.05) & (np.abs(verts[:, 0] - xc) < 0.1)
     zc = float(np.median(verts[by, 2])) if by.any() else float(np.median(verts[:, 2]))
     near &= (np.abs(mid[:, 1] - low) < CROTCH_BELOW) & ((x[pairs[:, 0], 2] - zc) * (x[pairs[:, 1], 2] - zc) < 0)
     if not near.any():
-        return None
+        return None, None
     worst = None
     gap = np.linalg.norm(x[pairs[near, 0]] - x[pairs[near, 1]], axis=1)
     for a, b in pairs[near][np.argsort(-gap)[:4]]:  # (the widest four: each pair costs 9 sections of the body)
@@ -696,13 +712,13 @@ def _crotch_short(job: _Dressing, state: ClothState, welded: np.ndarray) -> str 
         if body_len > 0 and reach < CROTCH_SHORT * body_len and (worst is None or reach / body_len < worst[0]):
             worst = (reach / body_len, reach, body_len, y_top)
     if worst is None:
-        return None
+        return None, None
     _, reach, body_len, y_top = worst
     return (f"The open seams meet under the body's crotch, and the cloth cannot reach round it: from the "
             f"top of the panels either side (at {y_top:.2f} m) down the front to the crotch and up the back is at most "
             f"{100 * reach:.0f} cm of cloth, where the body measures {100 * body_len:.0f} cm through its "
             "crotch from that height -- the rise is too short for this body (lengthen the crotch seams, or "
-            "let the top sit lower)")
+            "let the top sit lower)"), (reach, y_top, xc)
 
 
 def drape(model: ClothModel, state: ClothState, collider: Collider | None, request: TryOnOptions = TryOnOptions(),

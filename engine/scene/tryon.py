@@ -334,9 +334,15 @@ def _how_it_fit(fab, out) -> str:
 
 def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tuning, fabric_why: str, *,
                place=None, source: str = "pattern", progress: Progress | None = None, observer=None,
-               lift=None, panel_fabrics: dict[str, str] | None = None) -> tuple[DrapeResult, dict]:
+               lift=None, panel_fabrics: dict[str, str] | None = None,
+               drop: tuple[float, float, float] | None = None) -> tuple[DrapeResult, dict]:
     """run_tryon in the request's fabric (named, and why); panel_fabrics: panel name -> the fabric
-    of the parts sewn from another (engine.scene.drape.sew_and_drape)."""
+    of the parts sewn from another (engine.scene.drape.sew_and_drape). A pattern file whose
+    crotch seams stall because its rise is shorter than the body's crotch from where its top is
+    placed (engine.scene.drape: err.crotch), trousers alone (every panel a lower garment's), is
+    placed again that much lower, at most CROTCH_DROP
+    -- where a wearer would wear it -- and sewn once more (drop: (m lower, its rise m, the
+    body's from the placed top m))."""
     from engine.collide.bvh import MeshBVH, penetration_stats
 
     progress = progress or (lambda *a: None)
@@ -373,6 +379,11 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     garment = build_garment(spec, h=request.h, place=place, source=source)
     if pattern_file:
         placement_note = _over_the_shoulders(garment, body, inside, placement_note)
+    if drop is not None:
+        garment.positions[:, 1] -= drop[0]
+        said = (f"lowered {100 * drop[0]:.0f} cm: its rise, {100 * drop[1]:.0f} cm through the crotch, is shorter "
+                f"than the body's {100 * drop[2]:.0f} cm from where it was placed, so it sits lower, as it would be worn")
+        placement_note = f"{placement_note}; {said}" if placement_note else f"the pattern's own placement, {said}"
     plan = plan_maps(body, garment, request.texel, request.collision)
     floor = ground(body.vertices)  # (the feet do not move when the arms are raised and lowered)
     t0 = time.perf_counter()
@@ -399,16 +410,26 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
         arms = None
     if passing is not None:
         map_info["passed_through"] = passing.why
+    again = None
     try:
         res = sew_and_drape(garment, collider, request, tuning, progress, observer=observer, attachment=held,
                             body_bvh=bvh if lift is None else None, pass_through=passing,
                             floor=floor, panel_fabrics=panel_fabrics, arms=arms)
     except SimulationError as e:
-        _carried_hint(e, placement_note, body)
-        _hand_hint(e, body)
-        raise
+        # (trousers alone: a jumpsuit lowered would hang its bodice off the shoulders)
+        alone = pattern_file and drop is None and lower == frozenset(spec.pattern.panels)
+        again = _crotch_drop(e, body) if alone else None
+        if again is None:
+            _carried_hint(e, placement_note, body)
+            _hand_hint(e, body)
+            raise
     finally:
         collider.release()  # (the map collider's query helper thread)
+    if again is not None:
+        progress("sewing", 0.0, f"the rise is too short for where the top was placed: sewing it again "
+                                f"{100 * again[0]:.0f} cm lower")
+        return _run_tryon(loaded, spec, request, tuning, fabric_why, source=source, progress=progress,
+                          observer=observer, lift=lift, panel_fabrics=panel_fabrics, drop=again)
     res.spec = spec
     if passing is not None and res.released is False:
         map_info["passed_through"] += ("; the drape did not settle, so the whole body never took over: "
@@ -529,6 +550,27 @@ EXEMPT_AXIS = 0.4  # m: ... all of it that lies this near the body's vertical ax
 # rose to 1.37 m: its side seams caught on the arms)
 EXEMPT_TOP = 90
 LOWER_LABEL = "leg"  # GarmentCode's segmentation label of a lower garment's panels (its meta_garment)
+
+
+CROTCH_DROP = 0.15  # m: a lower garment whose rise is short is placed at most this much lower (_crotch_drop)
+
+
+def _crotch_drop(err: Exception, body: Body) -> tuple[float, float, float] | None:
+    """(m lower, the rise m, the body's crotch length from the placed top m) that lets the rise
+    of a lower garment whose crotch seams stalled short (err.crotch: its cloth through the crotch
+    shorter than the body's from where its top hangs) reach round -- trousers GarmentCode drafts
+    for f_smpl with a rise 19-27 cm shorter than that body's from 2.6 cm under its waist stalled
+    4-10 cm open; a wearer wears them lower. None where CROTCH_DROP lower is not enough."""
+    from engine.scene.drape import _crotch_length, crotch_fit_drop
+
+    short = getattr(err, "crotch", None)
+    if short is None:
+        return None
+    reach, y_top, xc = short
+    drop = crotch_fit_drop(body.vertices, body.faces, reach, y_top, xc, CROTCH_DROP)
+    if drop is None:
+        return None
+    return drop, reach, _crotch_length(body.vertices, body.faces, xc, y_top)[0]
 
 
 def judged_part(garment, lower: frozenset[str]) -> np.ndarray:
