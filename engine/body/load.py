@@ -4,9 +4,9 @@ DESIGN.md: metres, Y up, facing +Z, feet on y = 0, centred on x = z = 0 (boundin
 Units come from a plausible human height (metres, dm, cm, mm or inches; an adult's where two fit); the up axis from the shape (standing human: the long
 axis; the end with the flat soles is down); the front from the feet (toes point forward) and the
 face; a body standing turned about the vertical (10-45 degrees off the file's axes) is turned back
-square, its depth the horizontal direction of least spread. Messy scans are repaired (duplicate vertices merged, degenerate faces and tiny floating
-bits dropped, holes closed, a floor plate under the feet dropped) and every decision is
-written to Body.notes.
+square, its depth the horizontal direction of least spread. Messy scans are repaired
+(duplicate vertices merged, degenerate faces and tiny floating bits dropped, holes closed, a
+floor plate under the feet dropped) and every decision is written to Body.notes.
 
 Holes: scanners leave the crown, the soles, armpits and the crotch open, and drop scattered
 triangles. A horizontal cut through a hole is not a closed loop, so measurements read nonsense

@@ -580,7 +580,7 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
     err = SimulationError(f"sewing {when}{again}; open seams: {names}. {why}")
     if small and not crotch:  # (a fit, not the sewing: engine.scene.tryon drapes it in a stretchier knit)
         err.small_part, err.tight_panels = small[1], small[2]
-    if crotch:  # (reach m, the tops' height m, the body's centre x: tryon lowers the garment to fit)
+    if crotch:  # (reach, the tops' height, the body's centre x and length, m: tryon lowers the garment)
         err.crotch = short
     err.positions, err.triangles = state.x.copy(), _triangles(model)  # for a picture
     op = garment.seams[~welded]
@@ -678,7 +678,8 @@ def _crotch_short(job: _Dressing, state: ClothState, welded: np.ndarray) -> tupl
     can reach round it: the flat distance from each side's point up its panel to that panel's top
     (where it is held), front and back together, against the body's outline through the crotch
     from the height the tops hang at. A rise shorter than CROTCH_SHORT of it is named, with both
-    lengths, and (reach m, the tops' height m, the body's centre x); else (None, None)."""
+    lengths, and (reach m, the tops' height m, the body's centre x, the body's length m); else
+    (None, None)."""
     if job.body is None:
         return None, None
     g, x = job.garment, state.x
@@ -718,7 +719,7 @@ def _crotch_short(job: _Dressing, state: ClothState, welded: np.ndarray) -> tupl
             f"top of the panels either side (at {y_top:.2f} m) down the front to the crotch and up the back is at most "
             f"{100 * reach:.0f} cm of cloth, where the body measures {100 * body_len:.0f} cm through its "
             "crotch from that height -- the rise is too short for this body (lengthen the crotch seams, or "
-            "let the top sit lower)"), (reach, y_top, xc)
+            "let the top sit lower)"), (reach, y_top, xc, body_len)
 
 
 def drape(model: ClothModel, state: ClothState, collider: Collider | None, request: TryOnOptions = TryOnOptions(),

@@ -145,9 +145,9 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     knit -- and, where that names parts again, once more with those added; where the last names
     no new parts but held those in PART_KNIT again, or its seams stalled open at them, once more
     with those in RIB_KNIT (a rib stretches twice as far round; GarmentCode cuts some cuffs to the
-    wrist's girth on sleeves that end on the forearm), the others kept in PART_KNIT.
-    If none fits, the
-    first fabric's drape or the stretchiest knit's (tight, noted) or the first's refusal stands."""
+    wrist's girth on sleeves that end on the forearm), the others kept in PART_KNIT. If none
+    fits, the first fabric's drape or the stretchiest knit's (tight, noted) or the first's refusal
+    stands."""
     request, fabric_why = with_fabric(request, spec)
     kw = dict(place=place, source=source, progress=progress, observer=observer, lift=lift)
     if place is not None or fabric_why != "the default" or request.fabric in CLOSE_FIT_FABRICS:
@@ -340,9 +340,8 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     of the parts sewn from another (engine.scene.drape.sew_and_drape). A pattern file whose
     crotch seams stall because its rise is shorter than the body's crotch from where its top is
     placed (engine.scene.drape: err.crotch), trousers alone (every panel a lower garment's), is
-    placed again that much lower, at most CROTCH_DROP
-    -- where a wearer would wear it -- and sewn once more (drop: (m lower, its rise m, the
-    body's from the placed top m))."""
+    placed again that much lower, at most CROTCH_DROP -- where a wearer would wear it -- and sewn
+    once more (drop: (m lower, its rise m, the body's from the placed top m))."""
     from engine.collide.bvh import MeshBVH, penetration_stats
 
     progress = progress or (lambda *a: None)
@@ -561,16 +560,14 @@ def _crotch_drop(err: Exception, body: Body) -> tuple[float, float, float] | Non
     shorter than the body's from where its top hangs) reach round -- trousers GarmentCode drafts
     for f_smpl with a rise 19-27 cm shorter than that body's from 2.6 cm under its waist stalled
     4-10 cm open; a wearer wears them lower. None where CROTCH_DROP lower is not enough."""
-    from engine.scene.drape import _crotch_length, crotch_fit_drop
+    from engine.scene.drape import crotch_fit_drop
 
     short = getattr(err, "crotch", None)
     if short is None:
         return None
-    reach, y_top, xc = short
+    reach, y_top, xc, body_len = short
     drop = crotch_fit_drop(body.vertices, body.faces, reach, y_top, xc, CROTCH_DROP)
-    if drop is None:
-        return None
-    return drop, reach, _crotch_length(body.vertices, body.faces, xc, y_top)[0]
+    return None if drop is None else (drop, reach, body_len)
 
 
 def judged_part(garment, lower: frozenset[str]) -> np.ndarray:
