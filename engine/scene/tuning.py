@@ -70,7 +70,7 @@ class DrapeTuning:
     # a drape whose cloth ends deeper in the body than this (m, against its mesh) settles again
     # against the mesh itself, for at most finish_budget s (engine.scene.drape._finish_exact; None: never)
     finish_pen: float | None = 0.0015
-    finish_budget: float = 0.5
+    finish_budget: float = 1.0
     min_time: float = 0.1  # s: drape at least this long
     settle_time: float = 0.05  # s: settled when the RMS drift over each of two windows this long ...
     settle_speed: float = 0.005  # m/s: ... is below this
