@@ -1164,8 +1164,35 @@ def test_a_crotch_seam_left_open_under_the_body_names_a_rise_too_short():
     aside[[0, 2], 0] += 0.15  # (the pair beside a thigh, not under the crotch)
     assert said(0.25, aside) is None
     before = x.copy()
-    before[2, 2] = 0.10  # (both ends in front: a skirt's centre seam open there)
+    before[[0, 2], 2] = 0.10
+    before[[0, 2], 0] += (-0.02, 0.02)  # (both ends in front, apart sideways: a skirt's centre seam open there)
     assert said(0.25, before) is None
+    # both ends in front of the body's middle there, apart from front to back: trousers pulled up
+    # into the crotch (f_smpl 109_006: its crotch seams open 3 cm across it, the buttocks reaching
+    # further back than the front)
+    pulled = x.copy()
+    pulled[[0, 2], 2] = (0.10, 0.07)
+    assert said(0.25, pulled) is not None
+
+
+def test_trousers_with_a_waistband_may_be_lowered_a_jumpsuit_may_not():
+    """_below_arms: trousers whose waistband GarmentCode labels 'body' (not 'leg', f_smpl 109_006)
+    are still trousers alone, all under the armpits: lowered for a short rise; a bodice over the
+    shoulders is not (a jumpsuit lowered would hang off them)."""
+    from types import SimpleNamespace
+
+    from engine.body import resolve_body
+    from engine.scene.tryon import _armpit_y, _below_arms
+
+    body = resolve_body(str(SAMPLE_BODY))
+    armpit = _armpit_y(body)
+    names = ["pant_f", "pant_b", "wb"]
+    pos = np.array([[0.0, 0.6, 0.1], [0.0, 0.6, -0.1], [0.0, armpit - 0.3, 0.1]])
+    garment = SimpleNamespace(panel_names=names, panel=np.array([0, 1, 2]), positions=pos)
+    assert _below_arms(garment, body, frozenset({"pant_f", "pant_b"}))
+    pos[2, 1] = armpit + 0.2  # (the 'body' panel a bodice over the shoulders)
+    assert not _below_arms(garment, body, frozenset({"pant_f", "pant_b"}))
+    assert _below_arms(garment, body, frozenset(names))  # (every panel a lower garment's)
 
 
 @pytest.mark.integration

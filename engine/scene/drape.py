@@ -93,6 +93,7 @@ class DrapeResult:
     vertex_map: np.ndarray | None = None  # (N unsewn,) each garment vertex's index in positions (None: not sewn)
     finish: dict | None = None  # settled again against the body's mesh (_finish_exact), or None
     held: list[str] = field(default_factory=list)  # panels the strain limit holds at it over a tenth (held_panels)
+    lowered: tuple | None = None  # placed lower for a short rise (engine.scene.tryon._crotch_drop's), or None
 
 
 def _noop(stage: str, fraction: float, message: str) -> None:
@@ -619,6 +620,7 @@ def _too_small_panels(job: _Dressing, model: ClothModel, state: ClothState,
 
 CROTCH_NEAR = 0.06  # m: open pairs this near the body's centre plane ...
 CROTCH_BELOW = 0.08  # m: ... and this near the height of its crotch meet under it (_crotch_short)
+CROTCH_ACROSS = 2.0  # ... from front to back: across the middle, or this many times as far along z as x
 CROTCH_SHORT = 0.95  # the cloth's way through the crotch shorter than this share of the body's
 
 
@@ -693,10 +695,15 @@ def _crotch_short(job: _Dressing, state: ClothState, welded: np.ndarray) -> tupl
     _, low = _crotch_length(verts, faces, xc, float(mid[near, 1].max()) + CROTCH_BELOW)
     if not np.isfinite(low):
         return None, None
-    # (a pair from the front to the back, under it: not a skirt's centre seam, open in front)
+    # (a pair from the front to the back, under it: not a skirt's centre seam, open in front. Front
+    # and back of the body's middle there, or open front to back more than sideways: trousers pulled
+    # up into the crotch leave their crotch seams open across it, both ends a little in front of
+    # the middle of a body whose buttocks reach further back than its front -- f_smpl 109_006)
     by = (np.abs(verts[:, 1] - low) < 0.05) & (np.abs(verts[:, 0] - xc) < 0.1)
     zc = float(np.median(verts[by, 2])) if by.any() else float(np.median(verts[:, 2]))
-    near &= (np.abs(mid[:, 1] - low) < CROTCH_BELOW) & ((x[pairs[:, 0], 2] - zc) * (x[pairs[:, 1], 2] - zc) < 0)
+    d = x[pairs[:, 0]] - x[pairs[:, 1]]
+    across = ((x[pairs[:, 0], 2] - zc) * (x[pairs[:, 1], 2] - zc) < 0) | (np.abs(d[:, 2]) > CROTCH_ACROSS * np.abs(d[:, 0]))
+    near &= (np.abs(mid[:, 1] - low) < CROTCH_BELOW) & across
     if not near.any():
         return None, None
     worst = None

@@ -156,15 +156,19 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     say = progress or (lambda *a: None)
     quick = replace(tuning, drape=replace(tuning.drape, give_up=True))
 
+    lowered = [None]  # (m lower, ...) where the first drape was placed lower for a short rise
+
     def attempt(req: TryOnOptions, t: Tuning, why: str, parts: dict | None = None):
-        """A drape's (result, report), or the SimulationError that ended it."""
+        """A drape's (result, report), or the SimulationError that ended it; placed as low as the
+        first drape ended (a rise found short is not sewn short again in each fabric)."""
         try:
-            return _run_tryon(body, spec, req, t, why, panel_fabrics=parts, **kw)
+            return _run_tryon(body, spec, req, t, why, panel_fabrics=parts, drop=lowered[0], **kw)
         except SimulationError as e:
             return e
 
     # the first drape stops early once it clearly ends tight (DrapeTuning.give_up): the knits follow
     first = attempt(request, quick, fabric_why)
+    lowered[0] = getattr(first, "lowered", None) if isinstance(first, Exception) else first[0].lowered
     if isinstance(first, Exception) and not _no_fit(first):  # (sewing that stalled for another reason)
         raise first
     if _fits(first):
@@ -415,8 +419,9 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
                             body_bvh=bvh if lift is None else None, pass_through=passing,
                             floor=floor, panel_fabrics=panel_fabrics, arms=arms)
     except SimulationError as e:
-        # (trousers alone: a jumpsuit lowered would hang its bodice off the shoulders)
-        alone = pattern_file and drop is None and lower == frozenset(spec.pattern.panels)
+        # (trousers alone, or with a waistband -- no panel above the armpits: a jumpsuit lowered
+        # would hang its bodice off the shoulders)
+        alone = pattern_file and drop is None and bool(lower) and _below_arms(garment, body, lower)
         again = _crotch_drop(e, body) if alone else None
         if again is None:
             _carried_hint(e, placement_note, body)
@@ -427,9 +432,13 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     if again is not None:
         progress("sewing", 0.0, f"the rise is too short for where the top was placed: sewing it again "
                                 f"{100 * again[0]:.0f} cm lower")
-        return _run_tryon(loaded, spec, request, tuning, fabric_why, source=source, progress=progress,
-                          observer=observer, lift=lift, panel_fabrics=panel_fabrics, drop=again)
-    res.spec = spec
+        try:
+            return _run_tryon(loaded, spec, request, tuning, fabric_why, source=source, progress=progress,
+                              observer=observer, lift=lift, panel_fabrics=panel_fabrics, drop=again)
+        except SimulationError as e:
+            e.lowered = again  # (run_tryon's next fabric is placed as low)
+            raise
+    res.spec, res.lowered = spec, drop
     if passing is not None and res.released is False:
         map_info["passed_through"] += ("; the drape did not settle, so the whole body never took over: "
                                        "an arm may pass through the cloth (look at the pictures)")
@@ -568,6 +577,14 @@ def _crotch_drop(err: Exception, body: Body) -> tuple[float, float, float] | Non
     reach, y_top, xc, body_len = short
     drop = crotch_fit_drop(body.vertices, body.faces, reach, y_top, xc, CROTCH_DROP)
     return None if drop is None else (drop, reach, body_len)
+
+
+def _below_arms(garment, body: Body, lower: frozenset[str]) -> bool:
+    """Whether every panel of the placed garment but the lower garment's (`lower`: its trousers
+    or skirt) lies under the body's armpits: a waistband, not a bodice."""
+    armpit = _armpit_y(body)
+    other = ~np.isin(garment.panel_names, list(lower))[garment.panel]
+    return bool(np.isfinite(armpit)) and (not other.any() or float(garment.positions[other, 1].max()) < armpit)
 
 
 def judged_part(garment, lower: frozenset[str]) -> np.ndarray:
