@@ -147,7 +147,8 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     with those in RIB_KNIT (a rib stretches twice as far round; GarmentCode cuts some cuffs to the
     wrist's girth on sleeves that end on the forearm), the others kept in PART_KNIT. If none
     fits, the first fabric's drape or the stretchiest knit's (tight, noted) or the first's refusal
-    stands."""
+    stands. Where the first drape was placed lower for a short rise (_run_tryon's drop), every
+    later one is placed as low."""
     request, fabric_why = with_fabric(request, spec)
     kw = dict(place=place, source=source, progress=progress, observer=observer, lift=lift)
     if place is not None or fabric_why != "the default" or request.fabric in CLOSE_FIT_FABRICS:
@@ -582,9 +583,11 @@ def _crotch_drop(err: Exception, body: Body) -> tuple[float, float, float] | Non
 def _below_arms(garment, body: Body, lower: frozenset[str]) -> bool:
     """Whether every panel of the placed garment but the lower garment's (`lower`: its trousers
     or skirt) lies under the body's armpits: a waistband, not a bodice."""
-    armpit = _armpit_y(body)
     other = ~np.isin(garment.panel_names, list(lower))[garment.panel]
-    return bool(np.isfinite(armpit)) and (not other.any() or float(garment.positions[other, 1].max()) < armpit)
+    if not other.any():
+        return True
+    armpit = _armpit_y(body)
+    return bool(np.isfinite(armpit)) and float(garment.positions[other, 1].max()) < armpit
 
 
 def judged_part(garment, lower: frozenset[str]) -> np.ndarray:
