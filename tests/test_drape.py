@@ -968,6 +968,35 @@ def test_a_panel_that_rose_into_place_hanging_full_length_is_not_bunched_up():
     assert "bunched up" in hang_warnings(hang_shift(placed, risen))[0]
 
 
+def test_a_band_between_a_bodice_and_shorts_is_not_judged_by_its_own_height():
+    """mean_female 83_014: a curved waistband 18 cm long sewn under a bodice and over shorts
+    (its lower edge gathered into them) stands out in a ruffle 10 cm tall; the shorts, laid out
+    below, rose into place. The band joins the parts above and below (tryon._joins): its height is
+    theirs to set, so it is not called bunched up; the shorts hanging full length are judged. A
+    shorts panel heaped is still found."""
+    from types import SimpleNamespace
+
+    from engine.scene.tryon import BUNCHED, shortest_panel
+
+    y = np.linspace(0.0, 1.0, 11)
+
+    def panel(lo, tall):  # 11 rows of 3 points 5 cm apart, bottom row first
+        return np.array([[x, lo + tall * t, 0.0] for t in y for x in (0.0, 0.05, 0.1)])
+
+    placed = np.concatenate([panel(1.2, 0.4), panel(0.82, 0.18), panel(0.2, 0.4)])  # bodice, band, shorts
+    bottom, top = np.arange(3), np.arange(30, 33)
+    seams = np.concatenate([np.column_stack([bottom, 33 + top]), np.column_stack([33 + bottom, 66 + top])])
+    garment = SimpleNamespace(positions=placed, uv=placed[:, :2].copy(), panel=np.repeat([0, 1, 2], 33),
+                              panel_names=["bodice", "band", "shorts"], seams=seams, seam_id=np.repeat([0, 1], 3))
+    worn = np.concatenate([panel(1.1, 0.4), panel(1.0, 0.1), panel(0.6, 0.4)])  # the band 10 cm tall
+    ratio, name, _, _ = shortest_panel(garment, SimpleNamespace(positions=worn, vertex_map=np.arange(99)))
+    assert name != "band" and ratio >= BUNCHED, (ratio, name)
+    heaped = worn.copy()
+    heaped[66:] = panel(0.9, 0.1)  # the shorts heaped 10 cm tall under the band
+    ratio, name, _, _ = shortest_panel(garment, SimpleNamespace(positions=heaped, vertex_map=np.arange(99)))
+    assert name == "shorts" and ratio < BUNCHED, (ratio, name)
+
+
 def test_a_ring_tier_laid_out_tall_hangs_its_width_and_is_not_bunched_up():
     """A ruffle tier is a ring sector: GarmentCode lays it out flat and upright, 95 cm tall for a
     17 cm wide ring, and it hangs from its seam to the tier above 17 cm (its width), that seam

@@ -929,8 +929,9 @@ def shortest_panel(garment: Garment, res: DrapeResult, placed: np.ndarray | None
     hangs from all of them; a panel sewn nowhere hangs from its top HUNG_FROM). A ring
     sector (a circle peplum, a ruffle tier) laid out flat 95 cm tall hangs its ring's width, 17 cm.
     placed: the garment's positions to measure from (default garment.positions); skip: panel
-    names not judged (run_tryon: those under SMALL_PART of the cloth; where every panel that tall
-    is one, the ratio is inf: none bunched)."""
+    names not judged (run_tryon: those under SMALL_PART of the cloth), nor are panels sewn to a
+    panel above them and to one below (_joins: a band joining two parts); where every panel that
+    tall is one of those, the ratio is inf: none bunched."""
     from scipy.spatial import cKDTree
 
     vmap = res.vertex_map
@@ -963,6 +964,12 @@ def shortest_panel(garment: Garment, res: DrapeResult, placed: np.ndarray | None
         longest = max((n for _, _, n in across), default=0.0)
         across = [(h, v) for h, v, n in across if n >= ACROSS_SHARE * longest]
         top = max((h for h, _ in across), default=None)
+        if _joins(garment, p, on, y1):
+            # (a band or a yoke joining the parts above and below it: its height is theirs to set,
+            # not its own to hang -- mean_female 83_014's curved waistband, its lower edge
+            # gathered into the shorts, stands out in a ruffle 10 cm tall, 18 cm long)
+            skipped.append(name)
+            continue
         if across:
             hung = np.concatenate([v for h, v in across if h >= top - HUNG_FROM])
         elif mine.any():  # sewn only along seams running down (a collar on a V neckline): from all of them
@@ -977,6 +984,16 @@ def shortest_panel(garment: Garment, res: DrapeResult, placed: np.ndarray | None
     if best is None and skipped:  # (every panel that tall is a small part: none hangs to judge)
         return (np.inf, skipped[0], 0.0, 0.0)
     return best
+
+
+def _joins(garment: Garment, p: int, on: np.ndarray, y: np.ndarray) -> bool:
+    """Whether panel p (its vertices `on`) is sewn both to a panel that hangs above it and to one
+    that hangs below it (each panel's mean height `y` against p's draped top and bottom)."""
+    pairs = garment.seams[on[garment.seams].sum(axis=1) == 1]
+    other = np.unique(garment.panel[pairs[~on[pairs]]])
+    means = [float(y[garment.panel == q].mean()) for q in other]
+    top, bottom = float(y[on].max()), float(y[on].min())
+    return any(m > top for m in means) and any(m < bottom for m in means)
 
 
 def hang_warnings(shift: dict[str, float], crossing: str | None = None,
