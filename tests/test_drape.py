@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 from engine.cli import app
 from engine.scene.request import TryOnOptions
 from engine.scene.tuning import DrapeTuning, SewTuning, Tuning
-from tests.samples import GC_SHIRT, SAMPLE_BODY, SAMPLE_SKIRT, SMPL_BODY, write_arms_lowered_scan
+from tests.samples import GC_SHIRT, ROOT, SAMPLE_BODY, SAMPLE_SKIRT, SMPL_BODY, write_arms_lowered_scan
 
 pytestmark = pytest.mark.integration  # (dresses, walks, or runs the service)
 
@@ -421,6 +421,10 @@ def test_a_layout_that_clears_a_like_body_keeps_its_own_placement():
     for p in spec.pattern.panels.values():
         p.translation = [p.translation[0], p.translation[1], p.translation[2] - 12.0]  # cm
     assert pattern_placement(spec, smpl, inside(smpl))[1] == CARRIED
+    # a hood's halves laid through the head (as GarmentCode lays them on any body) are not
+    # counted: f_smpl 127_010's layout clears the rest of the body
+    hooded = load_pattern(ROOT / "tests" / "garmentcode" / "designs" / "f_smpl_average_A40_127_010_specification.json")
+    assert pattern_placement(hooded, smpl, inside(smpl))[1] == OWN_CLEARS
 
 
 def test_a_garment_that_falls_off_the_body_is_refused():

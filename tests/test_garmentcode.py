@@ -745,3 +745,46 @@ def test_trousers_whose_rise_is_short_are_worn_lower():
     assert m and 5 <= int(m.group(1)) <= 15 and int(m.group(2)) < int(m.group(3)), m
     assert rep["fabric"] == "cotton" and rep["settled"] and not rep["tight"], (rep["fabric"], rep["strain"])
     assert rep["penetration_mm"]["max"] <= 2.0 and rep["penetration_mm"]["p99"] <= 0.5, rep["penetration_mm"]
+
+
+@pytest.mark.slow
+@pytest.mark.integration
+def test_trousers_with_a_waistband_pulled_up_into_the_crotch_are_worn_lower_in_every_fabric():
+    """f_smpl 109_006, wide culottes with a waistband (labelled 'body', not 'leg'): their crotch
+    seams stalled 3 cm open across the crotch, both ends of each pair a little in front of the
+    middle of the body's cut there. The stall is read as a short rise (62 cm of cloth against the
+    body's 73); the waistband lies under the armpits, so they are placed lower, and every fabric
+    after the first is placed as low (the report says so): they drape."""
+    from engine.body import resolve_body
+    from engine.pattern.io import load_pattern
+    from engine.scene.tryon import run_tryon
+    from tests.samples import SMPL_BODY
+
+    said = []
+    res, rep = run_tryon(resolve_body(str(SMPL_BODY)), load_pattern(DESIGNS / "f_smpl_average_A40_109_006_specification.json"),
+                         progress=lambda stage, f, msg: said.append(msg))
+    assert sum(m.startswith("the rise is too short for where the top was placed") for m in said) == 1, said
+    assert re.search(r"lowered \d+ cm: its rise, \d+ cm through the crotch", rep.get("placement", "")), rep.get("placement")
+    assert rep["settled"] and not rep["tight"], (rep["fabric"], rep["strain"])
+    assert rep["penetration_mm"]["max"] <= 2.0 and rep["penetration_mm"]["p99"] <= 0.5, rep["penetration_mm"]
+
+
+@pytest.mark.slow
+@pytest.mark.integration
+def test_a_hood_laid_through_the_head_is_sewn_round_it():
+    """f_smpl 127_010, a hooded dress: GarmentCode lays the hood's halves through the head (47 % of
+    their points inside f_smpl's). Its own layout is kept (carried by the landmarks instead, the
+    hood's seams stalled 10 cm open); the hood is sewn round the head and sits on the shoulders."""
+    from engine.body import resolve_body
+    from engine.body.measure import measure
+    from engine.pattern.io import load_pattern
+    from engine.scene.tryon import run_tryon
+    from tests.samples import SMPL_BODY
+
+    body = resolve_body(str(SMPL_BODY))
+    res, rep = run_tryon(body, load_pattern(DESIGNS / "f_smpl_average_A40_127_010_specification.json"))
+    assert rep.get("placement", "").startswith("the pattern's own placement"), rep.get("placement")
+    assert rep["settled"] and not rep["tight"], (rep["fabric"], rep["strain"])
+    assert rep["penetration_mm"]["max"] <= 2.0 and rep["penetration_mm"]["p99"] <= 0.5, rep["penetration_mm"]
+    shoulders = float(body.vertices[:, 1].min()) + measure(body).shoulder_height
+    assert float(res.positions[:, 1].max()) > shoulders + 0.15  # (the hood up round the head, not fallen back)
