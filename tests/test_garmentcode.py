@@ -588,7 +588,7 @@ def test_a_drape_that_never_came_to_rest_at_the_fabrics_limit_is_draped_in_a_kni
     def scripted(body, spec, request, tuning, why, **kw):
         calls.append(request.fabric)
         if request.fabric == "cotton":
-            return SimpleNamespace(held=[]), {"tight": False, "settled": False, "warnings": [], "fabric_why": why,
+            return SimpleNamespace(held=[], lowered=None), {"tight": False, "settled": False, "warnings": [], "fabric_why": why,
                                               "strain": {"max": 0.058, "guard_share": share[0]}}
         return "knit", {"tight": False, "settled": True, "warnings": [], "fabric_why": why,
                         "strain": {"max": 0.153, "guard_share": 1.0}}
