@@ -32,9 +32,15 @@ def _port() -> int:
 
 
 @pytest.fixture()
-def server(tmp_path):
+def server_env() -> dict[str, str]:
+    """Settings the service under test is started with (a test module may override this fixture)."""
+    return {}
+
+
+@pytest.fixture()
+def server(tmp_path, server_env):
     port = _port()
-    env = dict(os.environ, TRYON_DATA=str(tmp_path / "data"))
+    env = dict(os.environ, TRYON_DATA=str(tmp_path / "data"), **server_env)
     log = open(tmp_path / "server.log", "wb")  # a file, not a pipe: a full pipe would block the server
     p = subprocess.Popen([sys.executable, "-m", "uvicorn", "--factory", "app.main:create_app", "--host", "127.0.0.1",
                           "--port", str(port)], cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
