@@ -964,7 +964,7 @@ def shortest_panel(garment: Garment, res: DrapeResult, placed: np.ndarray | None
         longest = max((n for _, _, n in across), default=0.0)
         across = [(h, v) for h, v, n in across if n >= ACROSS_SHARE * longest]
         top = max((h for h, _ in across), default=None)
-        if _joins(garment, p, on, y1):
+        if _joins(garment, on, y1):
             # (a band or a yoke joining the parts above and below it: its height is theirs to set,
             # not its own to hang -- mean_female 83_014's curved waistband, its lower edge
             # gathered into the shorts, stands out in a ruffle 10 cm tall, 18 cm long)
@@ -986,9 +986,9 @@ def shortest_panel(garment: Garment, res: DrapeResult, placed: np.ndarray | None
     return best
 
 
-def _joins(garment: Garment, p: int, on: np.ndarray, y: np.ndarray) -> bool:
-    """Whether panel p (its vertices `on`) is sewn both to a panel that hangs above it and to one
-    that hangs below it (each panel's mean height `y` against p's draped top and bottom)."""
+def _joins(garment: Garment, on: np.ndarray, y: np.ndarray) -> bool:
+    """Whether the panel of the vertices `on` is sewn both to a panel that hangs above it and to
+    one that hangs below it (each panel's mean height `y` against its draped top and bottom)."""
     pairs = garment.seams[on[garment.seams].sum(axis=1) == 1]
     other = np.unique(garment.panel[pairs[~on[pairs]]])
     means = [float(y[garment.panel == q].mean()) for q in other]
