@@ -344,8 +344,8 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     """run_tryon in the request's fabric (named, and why); panel_fabrics: panel name -> the fabric
     of the parts sewn from another (engine.scene.drape.sew_and_drape). A pattern file whose
     crotch seams stall because its rise is shorter than the body's crotch from where its top is
-    placed (engine.scene.drape: err.crotch), trousers alone (every panel a lower garment's), is
-    placed again that much lower, at most CROTCH_DROP -- where a wearer would wear it -- and sewn
+    placed (engine.scene.drape: err.crotch), trousers alone or with a waistband (every other panel
+    under the armpits: _below_arms), is placed again that much lower, at most CROTCH_DROP -- where a wearer would wear it -- and sewn
     once more (drop: (m lower, its rise m, the body's from the placed top m))."""
     from engine.collide.bvh import MeshBVH, penetration_stats
 
