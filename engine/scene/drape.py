@@ -406,6 +406,7 @@ def _pull(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSol
     window = min(t.snap_stall, t.retry_stall) if retry else t.snap_stall
     stall = deque(maxlen=2 * max(1, int(round(window / (check_every * dt)))))
     snap_from = int((min(t.snap_after, 2 * window) if retry else t.snap_after) / dt)
+    give_from = int(2 * window / dt)  # (a stall wider than snap_gap: judged from two windows on)
     calm = int(round(t.calm_start / dt))
     # a flat layout sews with gravity growing as its seams close (else it falls off the body
     # before they close round it): the share of the 90th-percentile gap closed, squared
@@ -438,8 +439,10 @@ def _pull(job: _Dressing, model: ClothModel, state: ClothState, solver: ClothSol
             # at once crumpled a fitted bodice while its shoulder seams were still 55 cm apart
             control.sewing = sewing = replace(sewing, tau=max(t.tau, g / sewing.vmax))
         stall.append(g)
-        if len(stall) == stall.maxlen and it >= snap_from and _stalled(out, stall, it, dt, t,
-                                                                       _lone_outside(job, state.x, pairs, welded)):
+        # (a stall wider than snap_gap gives up from give_from on; one within it is welded from
+        # snap_from on: it may yet close by itself)
+        if len(stall) == stall.maxlen and it >= give_from and \
+                _stalled(out, stall, it, dt, t, _lone_outside(job, state.x, pairs, welded), snap=it >= snap_from):
             break
         job.progress("sewing", min(1.0, 1.0 - g / max(gap0, 1e-9)), f"largest open seam gap {g * 100:.1f} cm")
     seam_gaps(state.x, pairs, out.gaps)
@@ -534,26 +537,29 @@ def _lone_outside(job: _Dressing, x: np.ndarray, pairs: np.ndarray, welded: np.n
     return bool((job.body.signed_distance(0.5 * (x[p[:, 0]] + x[p[:, 1]]), max_distance=0.1) > 0.0).all())
 
 
-def _stalled(out: _Pull, stall: deque, it: int, dt: float, t, lone: bool = False) -> bool:
+def _stalled(out: _Pull, stall: deque, it: int, dt: float, t, lone: bool = False, snap: bool = True) -> bool:
     """Whether the seams stopped closing (the widest gap's median shrank < 1 mm from the older half
     of the stall window to the recent one; its median, not its least: a gap swinging 1.7-3 cm
     for seconds has a new least now and then without closing): welded where they are if within
     snap_gap (now and in the median, a swaying pair included), given up (out.gave_up) where the
     median is wider (a gap swinging about snap_gap, neither, had sewn on to the end of the budget:
     minutes of wall time under cloth-cloth contact). lone: every open pair is alone on its stitch
-    (_lone_open): then within snap_lone_gap."""
+    (_lone_open): then within snap_lone_gap. snap: whether a stall within it may be welded yet
+    (SewTuning.snap_after); a wider one gives up whenever it is judged."""
     h = len(stall) // 2
     older, recent = list(stall)[:h], list(stall)[h:]
     if np.median(older) - np.median(recent) >= 0.001:
         return False
     g = stall[-1]
-    snap = max(t.snap_gap, t.snap_lone_gap) if lone else t.snap_gap
-    if g <= snap and np.median(recent) <= snap:
+    within = max(t.snap_gap, t.snap_lone_gap) if lone else t.snap_gap
+    if g <= within and np.median(recent) <= within:
+        if not snap:
+            return False
         out.snapped = int((~out.welded).sum())
         out.gap_max = max(out.gap_max, g)
         out.welded[:] = True
         return True
-    if np.median(recent) > snap:
+    if np.median(recent) > within:
         out.gave_up = ((it + 1) * dt, min(recent), max(recent))
         return True
     return False
@@ -576,21 +582,39 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
     again = f" (sewn twice, pulled at {pulls[0]:g} and {pulls[-1]:g} m/s)" if len(pulls) > 1 else ""
     small = _too_small_panels(job, model, state, welded)
     crotch, short = _crotch_short(job, state, welded)
+    op = garment.seams[~welded]
+    open_panels = sorted({garment.panel_names[p] for p in np.unique(garment.panel[op.ravel()])})
+    pinched = [n for n in open_panels if n in garment.pinched]
     why = (crotch if crotch else f"{small[0]}: that part is too small for this body (try a larger size)" if small else
-           OPEN_WHY)
+           _pinched_why(pinched) if pinched else OPEN_WHY)
     err = SimulationError(f"sewing {when}{again}; open seams: {names}. {why}")
     if small and not crotch:  # (a fit, not the sewing: engine.scene.tryon drapes it in a stretchier knit)
         err.small_part, err.tight_panels = small[1], small[2]
     if crotch:  # (reach, the tops' height, the body's centre x and length, m: tryon lowers the garment)
         err.crotch = short
     err.positions, err.triangles = state.x.copy(), _triangles(model)  # for a picture
-    op = garment.seams[~welded]
     err.open_points = 0.5 * (state.x[op[:, 0]] + state.x[op[:, 1]])  # (where they lie: tryon's hints)
-    err.open_panels = sorted({garment.panel_names[p] for p in np.unique(garment.panel[op.ravel()])})
+    err.open_panels = open_panels
     err.too_small = True  # (engine.scene.garments.add_size_hint)
     # where the open seams were placed (engine.scene.garments.arms_in_the_way)
     err.open_top = float(garment.positions[op.ravel(), 1].max())
     return err
+
+
+def pinched_outlines(names: list[str]) -> str:
+    """"panel X's outline crosses itself" / "the outlines of panels X, Y cross themselves"."""
+    if len(names) == 1:
+        return f"panel {names[0]}'s outline crosses itself"
+    return f"the outlines of panels {', '.join(names)} cross themselves"
+
+
+def _pinched_why(names: list[str]) -> str:
+    """Why seams beside panels whose outlines cross themselves stay open: GarmentCode draws a
+    neckline cut past the armholes so, and the parts beyond the crossing (a strap, a side) are
+    joined to the rest at one point, so nothing holds them where their seams are to meet."""
+    return (f"Beside them {pinched_outlines(names)} (meshed joined where the edges cross): the parts "
+            "beyond a crossing hang from a point and cannot be held where their seams meet (a "
+            "neckline cut past the armhole) -- check those edges in the pattern")
 
 
 def _too_small_panels(job: _Dressing, model: ClothModel, state: ClothState,

@@ -19,7 +19,7 @@ from engine.cloth.fabrics import get_fabric
 from engine.errors import InputError, SimulationError, TryonError
 from engine.garment.garment import Garment, build_garment
 from engine.pattern.spec import PatternSpec
-from engine.scene.drape import DrapeResult, Progress, ground, most_stretched, sew_and_drape
+from engine.scene.drape import DrapeResult, Progress, ground, most_stretched, pinched_outlines, sew_and_drape
 from engine.scene.garments import PATTERN_SIZE_ADVICE, dress_in_size
 from engine.scene.attach import attachment
 from engine.scene.request import TryOnOptions, TryOnRequest
@@ -1028,10 +1028,8 @@ def crossing_hint(garment: Garment) -> str | None:
     names = sorted(garment.pinched)
     if not names:
         return None
-    which = f"panel {names[0]}'s outline crosses" if len(names) == 1 else \
-        f"the outlines of panels {', '.join(names)} cross"
-    return (f"{which} {'itself' if len(names) == 1 else 'themselves'}: the parts beyond a crossing hang from a point and may not hold (a neckline "
-            "cut past the armhole) -- check those edges")
+    return (f"{pinched_outlines(names)}: the parts beyond a crossing hang from a point and may not hold (a "
+            "neckline cut past the armhole) -- check those edges")
 
 
 def write_pattern(out: Path, spec: PatternSpec | None) -> list[Path]:
