@@ -189,6 +189,31 @@ def test_a_design_whose_outlines_cross_says_so_when_it_falls():
     assert crossing_hint(plain) is None
 
 
+def test_a_stall_is_put_down_to_a_crossed_outline_only_beside_its_widest_gaps():
+    """pinched_open: the hooded dress 019's bodice panels cross themselves; a stall whose widest
+    open pairs lie on a bodice seam names them, one whose widest lie elsewhere (a skirt seam) does
+    not, though a bodice pair is open too, a little."""
+    from engine.garment.garment import build_garment
+    from engine.pattern.io import load_pattern
+    from engine.scene.drape import pinched_open
+
+    g = build_garment(load_pattern(DESIGNS / "mean_female_1_019_specification.json"), h=0.03)
+    assert g.pinched
+    names = np.array(g.panel_names)
+    on_pinched = np.isin(names[g.panel[g.seams]], g.pinched).any(axis=1)
+    assert on_pinched.any() and (~on_pinched).any()
+    welded = np.ones(len(g.seams), dtype=bool)
+    a, b = np.flatnonzero(on_pinched)[0], np.flatnonzero(~on_pinched)[0]
+    welded[[a, b]] = False
+    gaps = np.zeros(len(g.seams))
+    gaps[a], gaps[b] = 0.10, 0.02
+    found = pinched_open(g, welded, gaps)
+    assert found and set(found) <= set(g.pinched)
+    gaps[a], gaps[b] = 0.02, 0.10
+    assert pinched_open(g, welded, gaps) == []
+    assert pinched_open(g, np.ones(len(g.seams), dtype=bool), gaps) == []
+
+
 @pytest.mark.integration
 def test_a_top_whose_straps_do_not_hold_is_said_to_fall_off_the_shoulders():
     """37_025: GarmentCode cuts the bodice's neckline past the armholes, so each strap hangs from a

@@ -584,7 +584,7 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
     crotch, short = _crotch_short(job, state, welded)
     op = garment.seams[~welded]
     open_panels = sorted({garment.panel_names[p] for p in np.unique(garment.panel[op.ravel()])})
-    pinched = [n for n in open_panels if n in garment.pinched]
+    pinched = pinched_open(garment, welded, gaps)
     why = (crotch if crotch else f"{small[0]}: that part is too small for this body (try a larger size)" if small else
            _pinched_why(pinched) if pinched else OPEN_WHY)
     err = SimulationError(f"sewing {when}{again}; open seams: {names}. {why}")
@@ -606,6 +606,15 @@ def pinched_outlines(names: list[str]) -> str:
     if len(names) == 1:
         return f"panel {names[0]}'s outline crosses itself"
     return f"the outlines of panels {', '.join(names)} cross themselves"
+
+
+def pinched_open(garment: Garment, welded: np.ndarray, gaps: np.ndarray) -> list[str]:
+    """The panels whose outlines cross themselves (Garment.pinched) beside the widest open pairs
+    (at least half the widest gap): a crossed outline elsewhere is not why a skirt stalled."""
+    if welded.all() or not garment.pinched:
+        return []
+    wide = garment.seams[~welded & (gaps >= 0.5 * float(gaps[~welded].max()))]
+    return sorted({garment.panel_names[p] for p in np.unique(garment.panel[wide.ravel()])} & set(garment.pinched))
 
 
 def _pinched_why(names: list[str]) -> str:
