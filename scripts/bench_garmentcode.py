@@ -65,12 +65,15 @@ def verdict(rep: dict) -> str | None:
 def reason(msg: str) -> str:
     """An error message grouped by its kind (the design's name, numbers and names taken out); seams
     that stalled beside a part stretched far past the fabric (a cuff or a band cut smaller round
-    than the limb or body it closes round: the pattern's size, not the sewing) apart."""
+    than the limb or body it closes round: the pattern's size, not the sewing) apart, and those
+    beside a panel whose outline crosses itself (a neckline cut past the armholes)."""
     msg = re.sub(r"^\S+?(_specification\.json)?: (error: )?", "", msg)
     head = re.split(r"[;(]", msg)[0]
     kind = re.sub(r"'[^']*'|\d+(\.\d+)?", "#", head).strip()[:90]
     if "that part is too small for this body" in msg:
         kind += ", beside a part too small for the body"
+    elif "hang from a point and cannot be held" in msg:
+        kind += ", beside an outline that crosses itself"
     return kind
 
 
