@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from engine.cloth.config import Attachment, Control, Sewing, StepConfig
-from engine.cloth.fabrics import get_fabric
+from engine.cloth.fabrics import FABRICS, get_fabric
 from engine.cloth.model import ClothModel, ClothState, build_model, spring_strains, weld_model
 from engine.cloth.solver import ClothSolver, FireRelaxer
 from engine.cloth.welds import hold_welds, merge_map, seam_gaps
@@ -38,6 +38,7 @@ from engine.errors import SimulationError
 from engine.garment.garment import Garment
 from engine.scene.request import TryOnOptions
 from engine.scene.attach import welded
+from engine.scene.girth import girth_words, part_girths
 from engine.scene.layers import needs_self_contact
 from engine.scene.tuning import Tuning
 
@@ -585,8 +586,9 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
     op = garment.seams[~welded]
     open_panels = sorted({garment.panel_names[p] for p in np.unique(garment.panel[op.ravel()])})
     pinched = pinched_open(garment, welded, gaps)
-    why = (crotch if crotch else f"{small[0]}: that part is too small for this body (try a larger size)" if small else
-           _pinched_why(pinched) if pinched else OPEN_WHY)
+    round_ = _round_words(job, state, small[2]) if small and not crotch else None
+    why = (crotch if crotch else f"{small[0]}: that part is too small for this body{round_ or ''} (try a larger "
+           "size)" if small else _pinched_why(pinched) if pinched else OPEN_WHY)
     err = SimulationError(f"sewing {when}{again}; open seams: {names}. {why}")
     if small and not crotch:  # (a fit, not the sewing: engine.scene.tryon drapes it in a stretchier knit)
         err.small_part, err.tight_panels = small[1], small[2]
@@ -599,6 +601,17 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
     # where the open seams were placed (engine.scene.garments.arms_in_the_way)
     err.open_top = float(garment.positions[op.ravel(), 1].max())
     return err
+
+
+def _round_words(job: _Dressing, state: ClothState, names: list[str]) -> str | None:
+    """"; at 'cuff_f', 'cuff_b' the cloth is 16.6 cm round (at rest) where the body is 29.3 cm
+    round ..." (engine.scene.girth), or None where the body is not known or no part wraps it."""
+    if job.body is None:
+        return None
+    rings = part_girths(job.garment, state.x, names, job.body.verts, job.body.faces)
+    top = max(FABRICS.values(), key=lambda f: f.strain_threshold)
+    words = girth_words(rings, (top.name, top.strain_threshold))
+    return f"; {words}" if words else None
 
 
 def pinched_outlines(names: list[str]) -> str:

@@ -1,0 +1,104 @@
+"""engine.scene.girth: how far round a part too small for the body is, against the body where it
+sits -- on a band wrapped round a cylinder whose sizes are known."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from engine.garment.garment import build_garment
+from engine.pattern.spec import PatternSpec
+from engine.scene.girth import girth_words, part_girths
+
+WIDTH, DEPTH = 10.0, 6.0  # cm: each half of the band; the band is 20 cm round at rest
+
+
+def _band():
+    """A band of two rectangles sewn side to side, and a third panel sewn to neither."""
+    rect = {"vertices": [[0, 0], [WIDTH, 0], [WIDTH, DEPTH], [0, DEPTH]],
+            "edges": [{"endpoints": [i, (i + 1) % 4]} for i in range(4)]}
+    spec = PatternSpec.model_validate({"pattern": {
+        "panels": {"band_f": {**rect, "translation": [0, 0, 10]}, "band_b": {**rect, "translation": [0, 0, -10]},
+                   "apart": {**rect, "translation": [40, 0, 0]}},
+        "stitches": [[{"panel": "band_f", "edge": 1}, {"panel": "band_b", "edge": 3}],
+                     [{"panel": "band_f", "edge": 3}, {"panel": "band_b", "edge": 1}]]}})
+    return build_garment(spec, h=0.01)
+
+
+def _limb(girth: float, sections: int = 128, rings: int = 41):
+    """A tube `girth` m round (a 128-gon) and 0.4 m long, its axis along y, in small faces as a
+    body's mesh has them: (vertices, faces)."""
+    a = np.linspace(0, 2 * np.pi, sections, endpoint=False)
+    y = np.linspace(-0.2, 0.2, rings)
+    r = girth / (2 * sections * np.sin(np.pi / sections))  # (the polygon's perimeter is the girth)
+    v = np.stack([np.repeat(r * np.cos(a)[None], rings, 0), np.repeat(y[:, None], sections, 1),
+                  np.repeat(r * np.sin(a)[None], rings, 0)], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(rings - 1), np.arange(sections), indexing="ij")
+    a0, a1 = i * sections + j, i * sections + (j + 1) % sections
+    b0, b1 = a0 + sections, a1 + sections
+    f = np.concatenate([np.stack([a0, b0, a1], -1).reshape(-1, 3), np.stack([a1, b0, b1], -1).reshape(-1, 3)])
+    return v, f
+
+
+def _wrapped(g, radius: float, gap: float):
+    """The band wrapped round the y axis at `radius`, each half over pi - gap radians (its seams
+    `gap` radians open), 'apart' laid flat far off."""
+    x = np.zeros((len(g.positions), 3))
+    for p, name in enumerate(g.panel_names):
+        on = g.panel == p
+        u, v = g.uv[on, 0], g.uv[on, 1]
+        s = (u - u.min()) / (u.max() - u.min())
+        if name == "apart":
+            x[on] = np.c_[u + 1.0, v, np.zeros(on.sum())]
+            continue
+        a = (0.0 if name == "band_f" else np.pi) + gap / 2 + s * (np.pi - gap)
+        x[on] = np.c_[radius * np.cos(a), v - v.mean(), radius * np.sin(a)]
+    return x
+
+
+def test_a_band_round_a_limb_reads_its_length_at_rest_against_the_limbs_girth():
+    g = _band()
+    bv, bf = _limb(0.30)
+    x = _wrapped(g, 0.30 / (2 * np.pi) + 0.002, gap=0.3)  # (stretched round it, its seams 1.5 cm open)
+    rings = part_girths(g, x, ["band_f", "band_b"], bv, bf)
+    assert len(rings) == 1 and set(rings[0].panels) == {"band_f", "band_b"}, rings
+    r = rings[0]
+    assert abs(r.rest - 2 * WIDTH / 100) < 0.004, r  # (the open seams are left out: within a cloth edge)
+    assert abs(r.girth - 0.30) < 0.003, r
+    words = girth_words(rings, ("rib_knit", 0.4))
+    assert words and f"{100 * r.rest:.1f} cm round (at rest) where the body is 30.0 cm round" in words, words
+    assert "more than even rib_knit" in words, words
+    assert "more than even" not in girth_words(rings, ("rib_knit", 0.8))
+    # round a thinner limb, the same band (seams as open) reads the same length at rest
+    thin = part_girths(g, x, ["band_f", "band_b"], *_limb(0.22))
+    assert len(thin) == 1 and abs(thin[0].rest - r.rest) < 0.004 and abs(thin[0].girth - 0.22) < 0.003, thin
+    # one half of it named: the other half of the band counts round the limb too
+    half = part_girths(g, x, ["band_f"], bv, bf)
+    assert len(half) == 1 and abs(half[0].rest - r.rest) < 0.004, half
+
+
+def test_cloth_that_does_not_wrap_the_body_reads_no_girth():
+    g = _band()
+    bv, bf = _limb(0.30)
+    x = _wrapped(g, 0.30 / (2 * np.pi) + 0.002, gap=0.3)
+    assert part_girths(g, x, ["apart"], bv, bf) == []  # (far from the body)
+    # a band wider round than the limb: no stretch to close, no words
+    loose = part_girths(g, _wrapped(g, 0.30 / (2 * np.pi) + 0.002, gap=0.3), ["band_f", "band_b"], *_limb(0.15))
+    assert girth_words(loose) is None
+
+
+def test_the_sewing_error_says_it_in_centimetres_against_the_stretchiest_fabric():
+    """engine.scene.drape._round_words, which a stall beside a part too small adds to its error."""
+    from types import SimpleNamespace
+
+    from engine.cloth.fabrics import FABRICS
+    from engine.scene.drape import _round_words
+
+    g = _band()
+    bv, bf = _limb(0.60)  # (twice the band round: more than any fabric here stretches)
+    x = _wrapped(g, 0.60 / (2 * np.pi) + 0.002, gap=0.3)
+    job = SimpleNamespace(garment=g, body=SimpleNamespace(verts=bv, faces=bf))
+    words = _round_words(job, SimpleNamespace(x=x), ["band_f", "band_b"])
+    top = max(FABRICS.values(), key=lambda f: f.strain_threshold)
+    assert words and words.startswith("; at 'band_f' and 'band_b' the cloth is 20.0 cm round"), words
+    assert f"more than even {top.name} does" in words, words
+    assert _round_words(SimpleNamespace(garment=g, body=None), SimpleNamespace(x=x), ["band_f"]) is None
