@@ -328,6 +328,40 @@ def test_a_sliver_joining_two_parts_is_refused():
         build_garment(_spec(d), h=0.015)
 
 
+def _godet_panel(reach: float) -> dict:
+    """A skirt panel 78 x 50 cm with five godet cuts up from its hem whose tips reach `reach` cm
+    high, and its waist drawn as one edge per stretch between the cuts' tips (GarmentCode's
+    GodetSkirt: a cut taller than the skirt crosses the waist twice)."""
+    v, tips = [[0, 0]], [8, 23.5, 39, 54.5, 70]
+    for x in tips:  # (each cut: hem, tip, hem)
+        v += [[x - 3.3, 0], [x, reach], [x + 3.3, 0]]
+    v += [[78, 0], [78, 50]] + [[x, 50] for x in reversed(tips[1:])] + [[0, 50]]
+    m = len(v)
+    return {"vertices": v, "edges": [{"endpoints": [k, (k + 1) % m]} for k in range(m)]}
+
+
+def test_godet_cuts_a_little_past_the_waist_are_a_drawing_and_far_past_it_a_mix_up():
+    """Ten crossings where five godet cuts reach 4 cm past a 50 cm skirt's waist (mean_female
+    151_005): the outline winds once nearly everywhere -- meshed as drawn, with a warning. Cut 30
+    cm past it, the tips wind back over a large share of the panel: refused, naming the cause."""
+    from engine.garment.garment import build_garment
+
+    from engine.pattern import geometry as geo
+    from engine.pattern.validate import MAX_CROSSINGS, _self_intersection
+
+    near = _spec({"pattern": {"panels": {"skirt": _godet_panel(54.0)}}})
+    dense = [geo.edge_dense(near.pattern.panels["skirt"], e, near.scale, True, 64) for e in near.pattern.panels["skirt"].edges]
+    poly, seg = np.concatenate([d[:-1] for d in dense]), np.concatenate([np.full(len(d) - 1, i) for i, d in enumerate(dense)])
+    assert _self_intersection(poly, seg)[2] > MAX_CROSSINGS  # (more crossings than a few: the winding decides)
+    assert not _errors(near), _errors(near)
+    assert any("crosses itself" in p.message and p.level == "warning" for p in validate(near))
+    g = build_garment(near, h=0.015)
+    assert g.pinched == ["skirt"] and len(g.positions) > 500
+    far = _spec({"pattern": {"panels": {"skirt": _godet_panel(80.0)}}})
+    errs = _errors(far)
+    assert errs and "pairs of edges" in errs[0].message and "a dart or a cut reaches past" in errs[0].message, errs
+
+
 def test_an_outline_crossing_itself_many_times_is_refused():
     panel = _square_panel()
     n = 40  # a zigzag up the square, closed by a straight edge down its middle: dozens of crossings

@@ -147,6 +147,37 @@ def row_extent(outline: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return np.where(np.isfinite(lo), lo, 0.0), np.where(np.isfinite(hi), hi, 0.0)
 
 
+def winding_shares(poly: np.ndarray, cells: int = 160) -> tuple[float, float]:
+    """How the closed polyline poly (M, 2) winds, sampled on a grid of cells x cells over its box:
+    (the area it encloses at all, the share of that area wound the other way round or more than
+    once). An outline that crosses itself where a cut reaches a little past the panel's other side
+    winds once nearly everywhere; one whose vertices are out of order winds back over much of it."""
+    lo, hi = poly.min(0), poly.max(0)
+    size = np.maximum(hi - lo, 1e-12)
+    gx = lo[0] + (np.arange(cells) + 0.5) / cells * size[0]
+    gy = lo[1] + (np.arange(cells) + 0.5) / cells * size[1]
+    a, b = poly, np.roll(poly, -1, axis=0)
+    w = np.zeros((cells, cells), dtype=np.int64)  # (row: y, column: x)
+    for r, y in enumerate(gy):  # each row's winding from the segments that cross its height
+        up = (a[:, 1] <= y) & (b[:, 1] > y)
+        down = (b[:, 1] <= y) & (a[:, 1] > y)
+        k = up | down
+        if not k.any():
+            continue
+        t = (y - a[k, 1]) / (b[k, 1] - a[k, 1])
+        xc = a[k, 0] + t * (b[k, 0] - a[k, 0])
+        sign = np.where(up[k], 1, -1)
+        # a point winds by each crossing to its right: +1 going up, -1 going down
+        w[r] = (sign[None, :] * (xc[None, :] > gx[:, None])).sum(1)
+    filled = w != 0
+    if not filled.any():
+        return 0.0, 0.0
+    main = 1 if (w > 0).sum() >= (w < 0).sum() else -1
+    odd = filled & (w != main)
+    cell = size[0] * size[1] / cells ** 2
+    return float(filled.sum() * cell), float(odd.sum() / filled.sum())
+
+
 def segment_crossings(poly: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The non-adjacent segments of the closed polyline poly (M, 2) (segment k: poly[k] to
     poly[k + 1]) that properly cross: (i, j, t) with i < j, and t the crossing's fraction along
