@@ -363,6 +363,27 @@ def test_fire_mix_turns_velocity_toward_the_force_or_stops():
     assert np.any(v3 != 0.0)
 
 
+def test_fire_mix_free_leaves_the_free_vertices_to_the_solver():
+    """fire_mix_free: the vertices not free get fire_mix over themselves alone (their power, their
+    mix or stop); the free ones keep their velocity and position (cloth let fall: drape's stand_out)."""
+    f = np.array([[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, -9.8, 0.0]])
+    v = np.array([[0.5, 0.5, 0.0], [0.0, 0.0, 1.0], [0.3, -2.0, 0.0]])
+    x = np.array([[0.0, 1.0, 0.0], [0.5, 1.0, 0.2], [0.0, 0.5, 0.3]])
+    free = np.array([False, False, True])
+    none = np.zeros(3, dtype=np.bool_)
+    held = v[:2].copy()
+    want = 0.9 * held + 0.1 * np.linalg.norm(held) * f[:2] / np.linalg.norm(f[:2])
+    v1, x1 = v.copy(), x.copy()
+    assert KI.fire_mix_free(f, v1, x1, 0.01, 0.1, none, free) == pytest.approx(0.5)  # (the free one's power left out)
+    np.testing.assert_allclose(v1[:2], want, atol=1e-12)
+    np.testing.assert_array_equal(v1[2], v[2])
+    v2, x2 = v.copy(), x.copy()
+    v2[:2] *= -1
+    assert KI.fire_mix_free(f, v2, x2, 0.01, 0.1, none, free) < 0
+    assert np.all(v2[:2] == 0.0) and np.all(v2[2] == v[2]) and np.all(x2[2] == x[2])
+    np.testing.assert_allclose(x2[:2], x[:2] - 0.005 * (-v[:2]), atol=1e-15)
+
+
 
 def test_the_guard_takes_away_the_velocity_that_would_stretch_its_springs_again():
     """inelastic_guard: a vertex the strain guard moved keeps its velocity along and across its

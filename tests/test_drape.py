@@ -1355,3 +1355,42 @@ def test_cloth_that_flies_off_says_what_may_have_caused_it():
     bad[1, 0] = np.nan
     with pytest.raises(SimulationError, match=r"unstable while sewing .*tangled round the body.*softer fabric"):
         _check_finite(ClothState(bad, np.zeros_like(x)), "sewing")
+
+
+def _ring_cloth(r0: float, r1: float, y0: float, y1: float, n: int = 48, m: int = 12):
+    """A ring of cloth from radius r0 at height y0 to r1 at y1 round the y axis: (vertices, triangles)."""
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    s = np.linspace(0, 1, m)
+    r, y = r0 + s * (r1 - r0), y0 + s * (y1 - y0)
+    v = np.stack([r[:, None] * np.cos(a)[None], np.repeat(y[:, None], n, 1), r[:, None] * np.sin(a)[None]], -1)
+    i, j = np.meshgrid(np.arange(m - 1), np.arange(n), indexing="ij")
+    q0, q1 = i * n + j, i * n + (j + 1) % n
+    t = np.concatenate([np.stack([q0, q0 + n, q1], -1).reshape(-1, 3), np.stack([q1, q0 + n, q1 + n], -1).reshape(-1, 3)])
+    return v.reshape(-1, 3), t
+
+
+def test_cloth_standing_out_level_from_the_body_is_told_from_cloth_that_hangs():
+    """engine.scene.drape.standing_out: a flat ring round a trunk (a circle skirt's fan) stands out
+    where it is farther than stand_out_far from the body; the same cloth hanging as a cylinder, or
+    lying level on the ground, does not."""
+    import trimesh
+
+    from engine.collide.bvh import MeshBVH
+    from engine.scene.drape import standing_out
+    from engine.scene.tuning import Tuning
+
+    trunk = trimesh.creation.cylinder(radius=0.15, height=1.0, sections=64)
+    trunk.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
+    trunk.apply_translation([0, 1.0, 0])
+    body = MeshBVH(np.asarray(trunk.vertices), np.asarray(trunk.faces))
+    t = Tuning().drape
+    x, tri = _ring_cloth(0.16, 0.6, 1.0, 1.0)  # (level from the trunk out to 60 cm)
+    share = standing_out(x, tri, body, 0.0, t)
+    far = (0.6 ** 2 - (0.15 + t.stand_out_far) ** 2) / (0.6 ** 2 - 0.16 ** 2)
+    assert abs(share - far) < 0.05, (share, far)
+    x, tri = _ring_cloth(0.3, 0.3, 1.0, 0.5)  # (hanging)
+    assert standing_out(x, tri, body, 0.0, t) == 0.0
+    x, tri = _ring_cloth(0.16, 0.6, 0.02, 0.02)  # (on the ground at 0)
+    assert standing_out(x, tri, body, 0.0, t) == 0.0
+    x, tri = _ring_cloth(0.2, 0.5, 1.0, 0.6)  # (a cone 53 degrees from level: between the two marks)
+    assert standing_out(x, tri, body, 0.0, t) == 0.0 < standing_out(x, tri, body, 0.0, t, t.stand_out_hung)

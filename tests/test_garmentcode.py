@@ -5,7 +5,8 @@ a fitted dress, pants with cuffs, a gathered skirt, a collar with skirt levels, 
 laid out over the hands, a top on narrow straps, sleeves with a fifteen-gore skirt, a strapless top,
 a sleeveless dress and a bodice cut with no ease, cuffs cut smaller than the arm, a jumpsuit
 gathered at the waist, a top whose straps do not hold, a gown pooled on the floor, a skirt and a
-flounce laid out in rings past the armpits, a sleeveless sack dress wider than the A-pose's arms). The default suite
+flounce laid out in rings past the armpits, a sleeveless sack dress wider than the A-pose's arms, a
+high-low circle skirt that came to rest standing out, a godet skirt whose cuts reach past its waist). The default suite
 reads, checks and meshes them all and drapes several; the slow suite draws a fresh seeded sample and
 drapes it (scripts/bench_garmentcode.py's bars)."""
 
@@ -44,7 +45,7 @@ def test_the_handful_covers_what_it_says():
     names = set().union(*(_panels(p) for p in FILES))
     for part in ("wb_front", "pant_l_cuff_f", "hood", "collar_front", "ins_skirt_front", "sleeve_f", "skirt_panel"):
         assert any(n.startswith(part) or part in n for n in names), part
-    assert len(FILES) == 26
+    assert len(FILES) == 28
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name[:17])
@@ -212,6 +213,32 @@ def test_a_stall_is_put_down_to_a_crossed_outline_only_beside_its_widest_gaps():
     gaps[a], gaps[b] = 0.02, 0.10
     assert pinched_open(g, welded, gaps) == []
     assert pinched_open(g, np.ones(len(g.seams), dtype=bool), gaps) == []
+
+
+@pytest.mark.integration
+def test_a_circle_skirt_standing_out_round_the_hips_is_let_fall_until_it_hangs():
+    """f_smpl 149_007, a strapless dress with a high-low circle skirt: FIRE came to rest with the
+    skirt standing out level round the hips (8 % of the cloth 10 cm or more from the body within
+    45 degrees of level). The cloth away from the body is let fall (drape's stand_out): the report
+    says so, the drape ends hanging (under half the mark left even within 60 degrees of level),
+    the bodice still up (no warning that it slid), and the bars hold."""
+    from engine.body import resolve_body
+    from engine.collide.bvh import MeshBVH
+    from engine.pattern.io import load_pattern
+    from engine.scene.drape import standing_out
+    from engine.scene.tryon import run_tryon
+    from engine.scene.tuning import Tuning
+
+    body = resolve_body(str(SMPL_BODY))
+    res, rep = run_tryon(body, load_pattern(DESIGNS / "f_smpl_average_A40_149_007_specification.json"))
+    t = Tuning().drape
+    assert rep.get("stood_out") and rep["stood_out"]["share"] > t.stand_out, rep.get("stood_out")
+    floor = float(body.vertices[:, 1].min())
+    hung = standing_out(res.positions, res.triangles, MeshBVH(body.vertices, body.faces), floor, t, t.stand_out_hung)
+    assert hung < t.stand_out, hung
+    assert not any("slid" in w or "fell" in w for w in rep["warnings"]), rep["warnings"]
+    assert not rep["tight"] and rep["settled"], rep["strain"]
+    assert rep["penetration_mm"]["max"] <= 2.0 and rep["penetration_mm"]["p99"] <= 0.5, rep["penetration_mm"]
 
 
 @pytest.mark.integration

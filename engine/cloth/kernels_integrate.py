@@ -67,3 +67,37 @@ def fire_mix(f, v, x, dt, alpha, skip):
                 x[i, c] -= h * v[i, c]
                 v[i, c] = 0.0
     return p
+
+
+@serial_kernel
+def fire_mix_free(f, v, x, dt, alpha, skip, free):
+    """fire_mix over the vertices not `free` (N,) bool alone: their power decides, their velocities
+    turn or stop; the free ones move on as the solver left them (cloth let fall, drape's
+    stand_out)."""
+    p = 0.0
+    vv = 0.0
+    ff = 0.0
+    for i in range(v.shape[0]):
+        if free[i]:
+            continue
+        for c in range(3):
+            if not skip[i]:
+                p += f[i, c] * v[i, c]
+            vv += v[i, c] * v[i, c]
+            ff += f[i, c] * f[i, c]
+    if p > 0.0:
+        if ff > 0.0:
+            a = 1.0 - alpha
+            b = alpha * np.sqrt(vv / ff)
+            for i in range(v.shape[0]):
+                if not free[i]:
+                    for c in range(3):
+                        v[i, c] = a * v[i, c] + b * f[i, c]
+    else:
+        h = 0.5 * dt
+        for i in range(v.shape[0]):
+            if not free[i]:
+                for c in range(3):
+                    x[i, c] -= h * v[i, c]
+                    v[i, c] = 0.0
+    return p

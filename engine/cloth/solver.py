@@ -21,7 +21,7 @@ from engine.cloth import passes
 from engine.cloth.buffers import StepBuffers
 from engine.cloth.carry import CarriedAnswers
 from engine.cloth.config import Control, StepConfig
-from engine.cloth.kernels_integrate import fire_mix, kinetic_energy
+from engine.cloth.kernels_integrate import fire_mix, fire_mix_free, kinetic_energy
 from engine.cloth.kernels_strain import VM_PROVOT, max_strain
 from engine.cloth.model import ClothModel, ClothState
 from engine.cloth.passes import Forcing
@@ -50,9 +50,16 @@ class FireRelaxer:
     def __init__(self, alpha: float = 0.1, decay: float = 0.99, delay: int = 5):
         self.alpha0, self.decay, self.delay = alpha, decay, delay
         self.alpha, self.run, self.restarts = alpha, 0, 0
+        # (N,) bool: vertices left to fall as the solver moves them, outside FIRE's power and its
+        # stops (a circle skirt standing out: engine.scene.drape's stand_out), or None
+        self.free: np.ndarray | None = None
 
     def after_step(self, solver: "ClothSolver", state: ClothState) -> None:
-        if fire_mix(solver.f, state.v, state.x, solver.dt, self.alpha, solver.buf.contact) > 0.0:
+        if self.free is not None:
+            p = fire_mix_free(solver.f, state.v, state.x, solver.dt, self.alpha, solver.buf.contact, self.free)
+        else:
+            p = fire_mix(solver.f, state.v, state.x, solver.dt, self.alpha, solver.buf.contact)
+        if p > 0.0:
             self.run += 1
             if self.run > self.delay:
                 self.alpha *= self.decay

@@ -95,6 +95,8 @@ class DrapeResult:
     finish: dict | None = None  # settled again against the body's mesh (_finish_exact), or None
     held: list[str] = field(default_factory=list)  # panels the strain limit holds at it over a tenth (held_panels)
     lowered: tuple | None = None  # placed lower for a short rise (engine.scene.tryon._crotch_drop's), or None
+    # FIRE settled with cloth standing out from the body (drape's body): {share, at_s, viscous_s}, or None
+    stood_out: dict | None = None
 
 
 def _noop(stage: str, fraction: float, message: str) -> None:
@@ -271,7 +273,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOpt
         res = drape(model, state, collider, request, tuning, progress, observer,
                     gravity_from=sewn.gravity if sewn else 0.0, solver=solver,
                     attachment=sewn.attachment if sewn else attachment,
-                    release=None if exempt is None else (pass_through, exempt), floor=floor)
+                    release=None if exempt is None else (pass_through, exempt), floor=floor, body=body_bvh)
     except SimulationError as e:
         if getattr(e, "stretched_at", None) is not None:  # (too small: which parts)
             e.tight_panels = held_panels(garment, model, e.positions, vmap, get_fabric(request.fabric), guard)
@@ -779,7 +781,7 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
           tuning: Tuning = Tuning(), progress: Progress = _noop, observer: Observer | None = None,
           gravity_from: float = 1.0, solver: ClothSolver | None = None,
           attachment: Attachment | None = None, release: tuple | None = None,
-          floor: float | None = None) -> DrapeResult:
+          floor: float | None = None, body=None) -> DrapeResult:
     """The drape stage alone (module doc), from `state` (changed in place) of the sewn `model`:
     until the shape stops moving, or the budget ends; a garment left stretched past the fabric's
     threshold + too_tight is refused. Gravity grows from `gravity_from` x g over the rest of the
@@ -788,7 +790,10 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
     release: (PassThrough, the model's vertices it lets through) while `solver` answers them from the
     body less some parts: when the drape settles, `collider` (the whole body) takes over; where
     the left-out parts touch the cloth then, the drape goes on until it settles again.
-    floor: the ground's height (m; Control.floor), or None."""
+    floor: the ground's height (m; Control.floor), or None.
+    body: the body's MeshBVH, or None: where FIRE settles with cloth standing out from it
+    (standing_out, DrapeTuning.stand_out), the drape goes on with viscous damping until that cloth
+    has come down, then settles with FIRE again."""
     t = tuning.drape
     tuning.validate()
     fabric = get_fabric(request.fabric)
@@ -827,6 +832,8 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
     drift, guard_steps, guard_share = np.inf, 0, 0.0
     released = None if release is None else False  # (whether the whole body took over at a settle)
     polished, config0 = False, solver.config  # (polish_at: the doubled passes end with this drape)
+    tris = _triangles(model) if body is not None and t.stand_out is not None and fire is not None else None
+    stood = None  # (steps, share): when FIRE settled with cloth standing out, and how much
     for it in range(budget):
         # gravity goes on growing from where sewing left it (no second ramp from zero)
         control.gravity_scale = min(1.0, gravity_from + (it + 1) * dt / ramp)
@@ -845,6 +852,15 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
         snaps.append(state.x.copy())
         guards.append(guard_steps)
         guard_steps = 0
+        if stood is not None and len(stood) == 2 and (it + 1) % window == 0:
+            if ((it + 1 - stood[0]) * dt >= t.stand_out_for or
+                    standing_out(state.x, tris, body, floor, t, t.stand_out_hung) < 0.5 * t.stand_out):
+                fire.free = None  # (it came down, or had its time: all at rest with FIRE from here)
+                control.damping_scale = t.fire_damping
+                stood = (*stood, it + 1)
+                snaps.clear()
+                snaps.append(state.x.copy())
+                continue
         strains.append(solver.max_strain(state))
         if (control.collide_every > 1 and strains[-1] > tight and (it + 1) * dt > t.tight_grace
                 and tuning.collide_every is None):
@@ -898,6 +914,19 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
                     snaps.clear()
                     snaps.append(state.x.copy())
                     continue
+                if tris is not None and stood is None and (share := standing_out(state.x, tris, body, floor, t)) > t.stand_out:
+                    # FIRE zeroes every velocity whenever the cloth's power turns negative, and a
+                    # circle skirt standing out flat from the waist -- a balance, unstable, that
+                    # folds only once a fall has built up somewhere -- comes to rest so. The cloth
+                    # away from the body is let fall with viscous damping alone, and falls into
+                    # folds; FIRE holds the rest (a strapless bodice slid down to the waist when
+                    # all of it fell so; docs/tuning.md, stand_out)
+                    stood = (it + 1, share)
+                    fire.free = body.signed_distance(state.x, max_distance=t.stand_out_far) > 0.5 * t.stand_out_far
+                    control.damping_scale = t.damping
+                    snaps.clear()
+                    snaps.append(state.x.copy())
+                    continue
                 settled = True
                 break
     if release is not None:  # (it never settled: what it ends as meets the whole body from here on)
@@ -913,8 +942,34 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
                        seam_gap_max=0.0, settled=settled, kinetic_energy=solver.kinetic_energy(state),
                        strain_max=strain, dt=dt, strain_guard=solver.config.strain_guard,
                        guard_share=guard_share, snapped=0, released=released,
+                       stood_out=None if stood is None else {
+                           "share": stood[1], "at_s": stood[0] * dt,
+                           "viscous_s": ((stood[2] if len(stood) > 2 else it + 1) - stood[0]) * dt},
                        collide_every={"draping": int(every), **({"every_step_from_s": every_step_from * dt}
                                                                 if every_step_from is not None else {})})
+
+
+def standing_out(x: np.ndarray, tris: np.ndarray, body, floor: float | None, tuning, level: float | None = None) -> float:
+    """The share of the cloth's area that stands out from the body unheld: farther than
+    stand_out_far from it, tilted within 45 degrees of level (|normal y| > `level`, default
+    stand_out_level), and not on the ground. Cloth at rest hangs from where it is held; a part
+    lying level in the air is held up by its own stiffness (a circle skirt's flat fan round the hips)."""
+    t = tuning.drape if hasattr(tuning, "drape") else tuning
+    tilt = t.stand_out_level if level is None else level
+    p = x[tris]
+    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    area = np.linalg.norm(n, axis=1)
+    if area.sum() <= 0.0:
+        return 0.0
+    c = p.mean(1)
+    level = np.abs(n[:, 1]) > tilt * np.maximum(area, 1e-30)
+    if floor is not None:
+        level &= c[:, 1] > floor + t.stand_out_far
+    if not level.any():
+        return 0.0
+    far = np.zeros(len(c), dtype=bool)
+    far[level] = body.signed_distance(c[level], max_distance=2 * t.stand_out_far) > t.stand_out_far
+    return float(area[far].sum() / area.sum())
 
 
 def _polish(solver: ClothSolver, control: Control, tuning: Tuning, it: int,

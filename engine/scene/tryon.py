@@ -505,6 +505,7 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
         "left_out": plan.left_out,
         "self_contact": {"on": bool(res.self_contact[0]), "why": res.self_contact[1]},
         **({"exact_finish": res.finish} if res.finish else {}),
+        **({"stood_out": res.stood_out} if res.stood_out else {}),
         **({"placement": placement_note} if placement_note else {}),
         **({"attachment": held_note} if held_note else {}),
         "sew_friction": {"scale": float(tuning.sew.friction),

@@ -87,6 +87,17 @@ class DrapeTuning:
     # its budget, the strain guard and the body fighting, before it was found tight (35-45 s of
     # wall time on a GarmentCode top that then fit jersey in 2 s)
     knit_tight_after: float = 1.0
+    # where FIRE settles with more than this share of the cloth standing out from the body unheld
+    # (engine.scene.drape.standing_out: stand_out_far from it, within 45 degrees of level), the
+    # drape goes on with viscous damping until under half as much is left tilted past stand_out_hung
+    # (checked each settle window; FIRE back at once, the skirt stood as a bell), for at most
+    # stand_out_for s, then settles with FIRE again (None: never). A high-low circle skirt stood out
+    # as a flat fan 0.7 m wide (6.5 % of the cloth); skirts that hang, gathered or ruffled, 0-1.7 %
+    stand_out: float | None = 0.03
+    stand_out_far: float = 0.10  # m
+    stand_out_level: float = 0.7  # |normal y|: within 45 degrees of level
+    stand_out_hung: float = 0.5  # ... and to have come down: within 60 degrees
+    stand_out_for: float = 1.5  # s
     step: StepConfig = StepConfig(strain_guard=0.005)  # (sewing uses it too; its guard waits until welded)
     # a fabric allowed soft_from or more (a knit) is held soft_guard past its threshold: the softer
     # cloth overshoots the guard more between its passes (jersey ended 15.5-16.2 % at 0.5 %: either
@@ -105,7 +116,10 @@ class DrapeTuning:
             raise InputError(f"unknown relaxation '{self.relax}': use fire or viscous")
         if self.self_contact not in ("auto", "on", "off"):
             raise InputError(f"self_contact '{self.self_contact}': use auto, on or off")
-        for name, hi in (("layer_gap", 0.2), ("layer_clear", 1.0), ("layer_share", 1.0)):
+        if self.stand_out is not None and not (0.0 < self.stand_out <= 1.0):
+            raise InputError(f"stand_out {self.stand_out}: use a share of the cloth in (0, 1] or None")
+        for name, hi in (("layer_gap", 0.2), ("layer_clear", 1.0), ("layer_share", 1.0), ("stand_out_far", 1.0),
+                         ("stand_out_level", 1.0), ("stand_out_hung", 1.0), ("stand_out_for", 10.0)):
             v = getattr(self, name)
             if not (0.0 < v <= hi):
                 raise InputError(f"drape {name} {v}: use a positive number up to {hi:g}")
