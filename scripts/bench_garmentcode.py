@@ -59,6 +59,8 @@ def verdict(rep: dict) -> str | None:
             return "slid down the body (a warning)"
         if "bunched up" in w:
             return "bunched up (a warning)"
+        if "it stands off the body" in w:
+            return "stands off the body, held at its top (a warning)"
     return None
 
 

@@ -102,3 +102,34 @@ def test_the_sewing_error_says_it_in_centimetres_against_the_stretchiest_fabric(
     assert words and words.startswith("; at 'band_f' and 'band_b' the cloth is 20.0 cm round"), words
     assert f"more than even {top.name} does" in words, words
     assert _round_words(SimpleNamespace(garment=g, body=None), SimpleNamespace(x=x), ["band_f"]) is None
+
+
+def test_a_held_top_far_wider_than_the_body_is_said_to_stand_off_it():
+    """engine.scene.attach.stands_off: a skirt's top ('lower_interface', held as GarmentCode's
+    simulator holds it) that ended 1.2 times the body's girth round or more stands off the body
+    (GarmentCode cuts some without a waistband far wider than the waist); one round the body does not."""
+    from types import SimpleNamespace
+
+    from engine.cloth.config import Attachment
+    from engine.scene.attach import stands_off
+
+    rect = {"vertices": [[0, 0], [WIDTH, 0], [WIDTH, DEPTH], [0, DEPTH]],
+            "edges": [{"endpoints": [0, 1]}, {"endpoints": [1, 2]},
+                      {"endpoints": [2, 3], "label": "lower_interface"}, {"endpoints": [3, 0]}]}
+    spec = PatternSpec.model_validate({"pattern": {
+        "panels": {"band_f": {**rect, "translation": [0, 0, 10]}, "band_b": {**rect, "translation": [0, 0, -10]}},
+        "stitches": [[{"panel": "band_f", "edge": 1}, {"panel": "band_b", "edge": 3}],
+                     [{"panel": "band_f", "edge": 3}, {"panel": "band_b", "edge": 1}]]}})
+    g = build_garment(spec, h=0.01)
+    top = g.labelled["lower_interface"]
+    held = Attachment(vertices=top, points=np.zeros((len(top), 3)), normals=np.tile([0.0, 1.0, 0.0], (len(top), 1)),
+                      tau=np.full(len(top), 0.05), vmax=np.ones(len(top)))
+    ident = np.arange(len(g.positions))
+    thin = _limb(0.15)  # (the band is 20 cm round: a third wider than this body)
+    body = SimpleNamespace(vertices=thin[0], faces=thin[1])
+    x = _wrapped(g, 0.20 / (2 * np.pi), gap=0.0)
+    words = stands_off(g, body, x, ident, held)
+    assert words and "20 cm round where the body is 15 cm round" in words, words
+    fits = _limb(0.19)
+    assert stands_off(g, SimpleNamespace(vertices=fits[0], faces=fits[1]), x, ident, held) is None
+    assert stands_off(g, body, x, ident, None) is None  # (not held: it would fall, not stand off)

@@ -88,3 +88,35 @@ def welded(att: Attachment | None, vertex_map: np.ndarray) -> Attachment | None:
     new, first = np.unique(vertex_map[att.vertices], return_index=True)
     return Attachment(vertices=new.astype(np.int64), points=att.points[first], normals=att.normals[first],
                       tau=att.tau[first], vmax=att.vmax[first])
+
+
+STANDS_OFF = 1.2  # a held top this many times the body's girth round where it ended stands off the body
+
+
+def stands_off(garment: Garment, body: Body, draped: np.ndarray, vertex_map: np.ndarray | None,
+               held: Attachment | None) -> str | None:
+    """A warning where a lower garment's held top ('lower_interface') ended STANDS_OFF times the
+    body's girth round or more: GarmentCode's random skirts include tops cut far wider than the
+    waist with no waistband; held at the waist, as its simulator holds them, such a top stands off
+    the body as a tube (a real one would need a tie, elastic or a band). None: none held, its top
+    sewn to another part (a dress's skirt to its bodice), or it fits."""
+    from engine.body.measure import hull_perimeter, slice_pieces
+
+    v = garment.labelled.get("lower_interface")
+    if held is None or v is None or not len(v) or vertex_map is None or not np.isin(v, held.vertices).any():
+        return None
+    if np.isin(v, garment.seams).mean() > 0.5:  # (sewn to a bodice: the dress hangs from its shoulders)
+        return None
+    p = draped[vertex_map[v]]
+    y = float(np.median(p[:, 1]))
+    pieces = slice_pieces(body.vertices, body.faces, y)
+    if not pieces:
+        return None
+    mid = p[:, [0, 2]].mean(axis=0)
+    core = min(pieces, key=lambda q: float(np.linalg.norm(q.centroid - mid)))
+    top, girth = hull_perimeter(p[:, [0, 2]]), core.hull_perimeter
+    if girth <= 0.0 or top < STANDS_OFF * girth:
+        return None
+    return (f"the garment's top ('lower_interface') is {100 * top:.0f} cm round where the body is {100 * girth:.0f} cm "
+            "round: held there as GarmentCode's simulator holds it, it stands off the body (a real one would need a "
+            "waistband, a tie or elastic; look at the pictures)")

@@ -21,7 +21,7 @@ from engine.garment.garment import Garment, build_garment
 from engine.pattern.spec import PatternSpec
 from engine.scene.drape import DrapeResult, Progress, ground, most_stretched, pinched_outlines, sew_and_drape
 from engine.scene.garments import PATTERN_SIZE_ADVICE, dress_in_size
-from engine.scene.attach import attachment
+from engine.scene.attach import attachment, stands_off
 from engine.scene.request import TryOnOptions, TryOnRequest
 from engine.scene.tuning import Tuning
 
@@ -511,7 +511,8 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
         "sew_friction": {"scale": float(tuning.sew.friction),
                          "why": sew_note or ("asked for" if tuning.sew.friction else "the panels slide into place")},
         "tight": bool(res.strain_max > fab.strain_threshold + TIGHT),
-        "warnings": garment.warnings + hang_warnings(shift, crossing_hint(garment), shrunk, fell) + fit_warnings(res.strain_max, fab, res.settled,
+        "warnings": garment.warnings + hang_warnings(shift, crossing_hint(garment), shrunk, fell) + [
+            w for w in [stands_off(garment, body, res.positions, res.vertex_map, held)] if w] + fit_warnings(res.strain_max, fab, res.settled,
                                                                            tuning.drape.budget, pattern_file),
     }
     if lift is not None:
