@@ -106,8 +106,9 @@ def test_the_sewing_error_says_it_in_centimetres_against_the_stretchiest_fabric(
 
 def test_a_held_top_far_wider_than_the_body_is_said_to_stand_off_it():
     """engine.scene.attach.stands_off: a skirt's top ('lower_interface', held as GarmentCode's
-    simulator holds it) that ended 1.2 times the body's girth round or more stands off the body
-    (GarmentCode cuts some without a waistband far wider than the waist); one round the body does not."""
+    simulator holds it) that ended 4 cm or more off the body stands off it (GarmentCode cuts some
+    without a waistband far wider than the waist); one round the body does not."""
+    from engine.collide.bvh import MeshBVH
     from types import SimpleNamespace
 
     from engine.cloth.config import Attachment
@@ -125,11 +126,11 @@ def test_a_held_top_far_wider_than_the_body_is_said_to_stand_off_it():
     held = Attachment(vertices=top, points=np.zeros((len(top), 3)), normals=np.tile([0.0, 1.0, 0.0], (len(top), 1)),
                       tau=np.full(len(top), 0.05), vmax=np.ones(len(top)))
     ident = np.arange(len(g.positions))
-    thin = _limb(0.15)  # (the band is 20 cm round: a third wider than this body)
+    thin = _limb(0.10)  # (the band is 40 cm round: 5 cm off this body all round)
     body = SimpleNamespace(vertices=thin[0], faces=thin[1])
-    x = _wrapped(g, 0.20 / (2 * np.pi), gap=0.0)
-    words = stands_off(g, body, x, ident, held)
-    assert words and "20 cm round where the body is 15 cm round" in words, words
-    fits = _limb(0.19)
-    assert stands_off(g, SimpleNamespace(vertices=fits[0], faces=fits[1]), x, ident, held) is None
-    assert stands_off(g, body, x, ident, None) is None  # (not held: it would fall, not stand off)
+    x = _wrapped(g, 0.40 / (2 * np.pi), gap=0.0)
+    words = stands_off(g, body, x, ident, held, MeshBVH(*thin))
+    assert words and "40 cm round where the body is 10 cm round, 5 cm off the body" in words, words
+    fits = _limb(0.36)  # (under a centimetre off it)
+    assert stands_off(g, SimpleNamespace(vertices=fits[0], faces=fits[1]), x, ident, held, MeshBVH(*fits)) is None
+    assert stands_off(g, body, x, ident, None, MeshBVH(*thin)) is None  # (not held: it would fall, not stand off)
