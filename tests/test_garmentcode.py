@@ -162,6 +162,8 @@ def test_gathered_seams_pair_their_edges_evenly():
             lb = geo.edge_length(panels[st.b.panel], panels[st.b.panel].edges[st.b.edge], scale, rel)
             if max(la, lb) < 1.3 * min(la, lb) or min(la, lb) < 0.02:  # (a millimetre edge is a corner, not a gather)
                 continue
+            if {st.a.panel, st.b.panel} & set(g.pinched):  # (an outline sample moved onto a crossing: 151_005's godets)
+                continue
             gathered += 1
             pairs = g.seams[g.seam_id == s]
             share = []

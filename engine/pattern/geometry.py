@@ -178,6 +178,18 @@ def winding_shares(poly: np.ndarray, cells: int = 160) -> tuple[float, float]:
     return float(filled.sum() * cell), float(odd.sum() / filled.sum())
 
 
+def crossing_spans(poly: np.ndarray) -> np.ndarray:
+    """For each place the closed polyline poly (M, 2) crosses itself (segment_crossings), how far
+    apart its two points lie along the outline, the shorter way round (m): a few millimetres where
+    neighbouring vertices are out of order (a twist), a panel's width where a cut reaches past
+    its other side."""
+    i, j, t = segment_crossings(poly)
+    seg = np.linalg.norm(np.roll(poly, -1, axis=0) - poly, axis=1)
+    start = np.r_[0.0, np.cumsum(seg)[:-1]]
+    d = np.abs((start[i] + t * seg[i]) - (start[j] + 0.5 * seg[j]))
+    return np.minimum(d, seg.sum() - d)
+
+
 def segment_crossings(poly: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The non-adjacent segments of the closed polyline poly (M, 2) (segment k: poly[k] to
     poly[k + 1]) that properly cross: (i, j, t) with i < j, and t the crossing's fraction along

@@ -24,6 +24,7 @@ MAX_CROSSINGS = 8  # pairs of edges of an outline that cross: more is not a draw
 # GarmentCode's godet cuts reaching 4 cm past a 50 cm skirt's waist cross it 10 times and wind back over
 # 0.2 % of it -- a drawing, meshed as drawn; 29 cm cuts through a 5 cm band wind back over most of it
 MAX_WOUND_BACK = 0.02
+TWIST = 0.01  # m: ... or where it crosses itself within this along the outline (neighbouring vertices out of order)
 MAX_EDGES = 20_000  # in a whole pattern: garments have hundreds; a large DXF a few thousand
 
 
@@ -119,7 +120,8 @@ def _check_panel(name: str, panel, scale: float, rel: bool) -> list[Problem]:
         return [Problem("error", name, None, str(e))]
     if crossing is not None:
         i, j, n = crossing
-        if n > MAX_CROSSINGS and geo.winding_shares(poly)[1] > MAX_WOUND_BACK:
+        if n > MAX_CROSSINGS and (geo.winding_shares(poly)[1] > MAX_WOUND_BACK or
+                                  float(geo.crossing_spans(poly).min()) < TWIST):
             out.append(Problem("error", name, i, f"outline crosses itself between {n} pairs of edges (edge {i} "
                                                  f"crosses edge {j}): check the order of its vertices and edges, "
                                                  "and whether a dart or a cut reaches past the panel's other side"))

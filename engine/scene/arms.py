@@ -29,7 +29,7 @@ from engine.cloth.config import Control
 from engine.cloth.model import ClothState
 from engine.cloth.solver import ClothSolver
 from engine.errors import InputError
-from engine.scene.drape import DrapeResult, Progress, drape, dressing_config, ground
+from engine.scene.drape import Around, DrapeResult, Progress, drape, dressing_config, ground
 from engine.scene.request import TryOnOptions
 from engine.scene.tuning import Tuning
 
@@ -158,7 +158,7 @@ def lower_arms(lift: ArmLift, res: DrapeResult, request: TryOnOptions, tuning: T
         # the cloth lies pressed between the lowered arms and the torso: checked at every step
         settling = tuning if tuning.collide_every is not None else replace(tuning, collide_every=1)
         settled = drape(res.model, state, collider, request, settling, lambda s, f, m: progress("settling", f, m),
-                        observer, gravity_from=1.0, solver=solver, floor=floor)
+                        observer, gravity_from=1.0, solver=solver, around=Around(floor))
     finally:
         collider.release()  # (its query helper thread)
     w = walk.report

@@ -69,6 +69,17 @@ def dressing_config(request: TryOnOptions, tuning: Tuning, layered: bool = False
     return replace(step, self_collision=True) if on else step
 
 
+@dataclass(frozen=True)
+class Around:
+    """What a drape meets besides its collider. floor: the ground's height (m; Control.floor), or
+    None. body: the body's MeshBVH, or None: where FIRE settles with cloth standing out from it
+    (standing_out, DrapeTuning.stand_out), the cloth away from it is let fall until it hangs, then
+    settles with FIRE again."""
+
+    floor: float | None = None
+    body: object = None
+
+
 @dataclass
 class DrapeResult:
     positions: np.ndarray  # (N, 3) final cloth vertices (sewn)
@@ -273,10 +284,14 @@ def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOpt
         res = drape(model, state, collider, request, tuning, progress, observer,
                     gravity_from=sewn.gravity if sewn else 0.0, solver=solver,
                     attachment=sewn.attachment if sewn else attachment,
-                    release=None if exempt is None else (pass_through, exempt), floor=floor, body=body_bvh)
+                    release=None if exempt is None else (pass_through, exempt), around=Around(floor, body_bvh))
     except SimulationError as e:
-        if getattr(e, "stretched_at", None) is not None:  # (too small: which parts)
+        if getattr(e, "stretched_at", None) is not None:  # (too small: which parts, and how far round)
             e.tight_panels = held_panels(garment, model, e.positions, vmap, get_fabric(request.fabric), guard)
+            words = _round_words(job, e.positions[vmap] if vmap is not None else e.positions, e.tight_panels)
+            msg, tail = str(e), "; try a larger size"
+            if words and msg.endswith(tail):
+                e.args = (msg[:-len(tail)] + words + tail,) + tuple(e.args[1:])
         raise
     if body_bvh is not None and request.collision == "image" and tuning.drape.finish_pen is not None:
         res = _finish_exact(job, res, solver, sewn.attachment if sewn else attachment, floor)
@@ -588,7 +603,7 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
     op = garment.seams[~welded]
     open_panels = sorted({garment.panel_names[p] for p in np.unique(garment.panel[op.ravel()])})
     pinched = pinched_open(garment, welded, gaps)
-    round_ = _round_words(job, state, small[2]) if small and not crotch else None
+    round_ = _round_words(job, state.x, small[2]) if small and not crotch else None
     why = (crotch if crotch else f"{small[0]}: that part is too small for this body{round_ or ''} (try a larger "
            "size)" if small else _pinched_why(pinched) if pinched else OPEN_WHY)
     err = SimulationError(f"sewing {when}{again}; open seams: {names}. {why}")
@@ -605,12 +620,13 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
     return err
 
 
-def _round_words(job: _Dressing, state: ClothState, names: list[str]) -> str | None:
+def _round_words(job: _Dressing, x: np.ndarray, names: list[str]) -> str | None:
     """"; at 'cuff_f', 'cuff_b' the cloth is 16.6 cm round (at rest) where the body is 29.3 cm
-    round ..." (engine.scene.girth), or None where the body is not known or no part wraps it."""
-    if job.body is None:
+    round ..." (engine.scene.girth; x: (garment vertices, 3)), or None where the body is not known,
+    no part is named or none wraps it."""
+    if job.body is None or not names:
         return None
-    rings = part_girths(job.garment, state.x, names, job.body.verts, job.body.faces)
+    rings = part_girths(job.garment, x, names, job.body.verts, job.body.faces)
     top = max(FABRICS.values(), key=lambda f: f.strain_threshold)
     words = girth_words(rings, (top.name, top.strain_threshold))
     return f"; {words}" if words else None
@@ -781,7 +797,7 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
           tuning: Tuning = Tuning(), progress: Progress = _noop, observer: Observer | None = None,
           gravity_from: float = 1.0, solver: ClothSolver | None = None,
           attachment: Attachment | None = None, release: tuple | None = None,
-          floor: float | None = None, body=None) -> DrapeResult:
+          around: Around = Around()) -> DrapeResult:
     """The drape stage alone (module doc), from `state` (changed in place) of the sewn `model`:
     until the shape stops moving, or the budget ends; a garment left stretched past the fabric's
     threshold + too_tight is refused. Gravity grows from `gravity_from` x g over the rest of the
@@ -790,11 +806,9 @@ def drape(model: ClothModel, state: ClothState, collider: Collider | None, reque
     release: (PassThrough, the model's vertices it lets through) while `solver` answers them from the
     body less some parts: when the drape settles, `collider` (the whole body) takes over; where
     the left-out parts touch the cloth then, the drape goes on until it settles again.
-    floor: the ground's height (m; Control.floor), or None.
-    body: the body's MeshBVH, or None: where FIRE settles with cloth standing out from it
-    (standing_out, DrapeTuning.stand_out), the drape goes on with viscous damping until that cloth
-    has come down, then settles with FIRE again."""
+    around: the ground and the body (Around)."""
     t = tuning.drape
+    floor, body = around.floor, around.body
     tuning.validate()
     fabric = get_fabric(request.fabric)
     if solver is None:
@@ -1015,7 +1029,8 @@ def _finish_exact(job: _Dressing, res: DrapeResult, solver: ClothSolver, attachm
     solver.set_collider(exact)
     try:
         fin = drape(res.model, ClothState(res.state.x.copy(), res.state.v.copy()), exact, job.request, tuning,
-                    job.progress, job.observer, gravity_from=1.0, solver=solver, attachment=attachment, floor=floor)
+                    job.progress, job.observer, gravity_from=1.0, solver=solver, attachment=attachment,
+                    around=Around(floor))
     except SimulationError as e:
         fin, why = None, str(e)
     finally:
