@@ -21,8 +21,8 @@ from engine.pattern.spec import PatternSpec
 MAX_GATHER = 4.0  # a stitched edge at most this many times the length of the edge it is sewn to
 MAX_CROSSINGS = 8  # pairs of edges of an outline that cross: more is not a drawing but a mix-up ...
 # ... where the outline winds back over more than this share of what it encloses (geometry.winding_shares):
-# GarmentCode's godet cuts reaching 4 cm past a 50 cm skirt's waist cross it 10 times and wind back over
-# 0.2 % of it -- a drawing, meshed as drawn; 29 cm cuts through a 5 cm band wind back over most of it
+# GarmentCode's godet cuts reaching a little past a skirt's waist cross it many times and wind back
+# over almost none of it -- a drawing, meshed as drawn; cuts far past a narrow band wind back over most
 MAX_WOUND_BACK = 0.02
 TWIST = 0.01  # m: ... or where it crosses itself within this along the outline (neighbouring vertices out of order)
 MAX_EDGES = 20_000  # in a whole pattern: garments have hundreds; a large DXF a few thousand

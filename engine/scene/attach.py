@@ -100,8 +100,8 @@ def stands_off(garment: Garment, body: Body, draped: np.ndarray, vertex_map: np.
     random skirts include tops cut far wider than the waist with no waistband; held at the waist,
     as its simulator holds them, such a top stands off the body as a tube (a real one would need a
     tie, elastic or a band). None: none held, its top sewn to another part (a dress's skirt to its
-    bodice), or it lies on the body (a ruffled waistband: mean_female 151_012, its hull 100 cm
-    round on a waist of 82, lies on it)."""
+    bodice), or it lies on the body (a ruffled waistband's hull is wider round than the waist, and
+    it lies on it: judged by distance, not by girth)."""
     from engine.body.measure import hull_perimeter, slice_pieces
 
     v = garment.labelled.get("lower_interface")

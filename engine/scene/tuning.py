@@ -89,10 +89,10 @@ class DrapeTuning:
     knit_tight_after: float = 1.0
     # where FIRE settles with more than this share of the cloth standing out from the body unheld
     # (engine.scene.drape.standing_out: stand_out_far from it, within 45 degrees of level), the
-    # drape goes on with viscous damping until under half as much is left tilted past stand_out_hung
-    # (checked each settle window; FIRE back at once, the skirt stood as a bell), for at most
-    # stand_out_for s, then settles with FIRE again (None: never). A high-low circle skirt stood out
-    # as a flat fan 0.7 m wide (6.5 % of the cloth); skirts that hang, gathered or ruffled, 0-1.7 %
+    # cloth away from the body is let fall with viscous damping until under half as much is left
+    # tilted past stand_out_hung (checked each settle window), for at most stand_out_for s, then
+    # settles with FIRE again (None: never): a circle skirt's flat fan, not a skirt that hangs
+    # (the figures: docs/tuning.md, stand_out)
     stand_out: float | None = 0.03
     stand_out_far: float = 0.10  # m
     stand_out_level: float = 0.7  # |normal y|: within 45 degrees of level
