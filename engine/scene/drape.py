@@ -106,7 +106,7 @@ class DrapeResult:
     finish: dict | None = None  # settled again against the body's mesh (_finish_exact), or None
     held: list[str] = field(default_factory=list)  # panels the strain limit holds at it over a tenth (held_panels)
     lowered: tuple | None = None  # placed lower for a short rise (engine.scene.tryon._crotch_drop's), or None
-    # FIRE settled with cloth standing out from the body (drape's body): {share, at_s, viscous_s}, or None
+    # FIRE settled with cloth standing out from the body (drape's around.body): {share, at_s, viscous_s}, or None
     stood_out: dict | None = None
 
 
@@ -976,13 +976,13 @@ def standing_out(x: np.ndarray, tris: np.ndarray, body, floor: float | None, tun
     if area.sum() <= 0.0:
         return 0.0
     c = p.mean(1)
-    level = np.abs(n[:, 1]) > tilt * np.maximum(area, 1e-30)
+    flat = np.abs(n[:, 1]) > tilt * np.maximum(area, 1e-30)
     if floor is not None:
-        level &= c[:, 1] > floor + t.stand_out_far
-    if not level.any():
+        flat &= c[:, 1] > floor + t.stand_out_far
+    if not flat.any():
         return 0.0
     far = np.zeros(len(c), dtype=bool)
-    far[level] = body.signed_distance(c[level], max_distance=2 * t.stand_out_far) > t.stand_out_far
+    far[flat] = body.signed_distance(c[flat], max_distance=2 * t.stand_out_far) > t.stand_out_far
     return float(area[far].sum() / area.sum())
 
 
