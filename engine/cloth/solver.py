@@ -21,7 +21,7 @@ from engine.cloth import passes
 from engine.cloth.buffers import StepBuffers
 from engine.cloth.carry import CarriedAnswers
 from engine.cloth.config import Control, StepConfig
-from engine.cloth.kernels_integrate import fire_mix, kinetic_energy
+from engine.cloth.kernels_integrate import fire_mix, fire_mix_free, kinetic_energy
 from engine.cloth.kernels_strain import VM_PROVOT, max_strain
 from engine.cloth.model import ClothModel, ClothState
 from engine.cloth.passes import Forcing
@@ -53,15 +53,13 @@ class FireRelaxer:
         # (N,) bool: vertices left to fall as the solver moves them, outside FIRE's power and its
         # stops (a circle skirt standing out: engine.scene.drape's stand_out), or None
         self.free: np.ndarray | None = None
-        self._none: np.ndarray | None = None
 
     def after_step(self, solver: "ClothSolver", state: ClothState) -> None:
-        free = self.free
-        if free is None:  # (none free: the kernel's mask all False, kept for the next step)
-            if self._none is None or len(self._none) != len(state.x):
-                self._none = np.zeros(len(state.x), dtype=np.bool_)
-            free = self._none
-        if fire_mix(solver.f, state.v, state.x, solver.dt, self.alpha, solver.buf.contact, free) > 0.0:
+        if self.free is not None:
+            p = fire_mix_free(solver.f, state.v, state.x, solver.dt, self.alpha, solver.buf.contact, self.free)
+        else:
+            p = fire_mix(solver.f, state.v, state.x, solver.dt, self.alpha, solver.buf.contact)
+        if p > 0.0:
             self.run += 1
             if self.run > self.delay:
                 self.alpha *= self.decay
