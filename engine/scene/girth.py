@@ -44,27 +44,19 @@ class Ring:
 
 def _groups(garment: Garment, names: list[str]) -> list[list[int]]:
     """The named panels' indices, grouped where a stitch joins them (a cuff's front and back)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
     idx = [garment.panel_names.index(n) for n in names if n in garment.panel_names]
-    parent = {p: p for p in idx}
-
-    def root(p):
-        while parent[p] != p:
-            p = parent[p]
-        return p
-
-    pp = garment.panel[garment.seams]
-    for a, b in {(int(a), int(b)) for a, b in pp}:
-        if a in parent and b in parent:
-            parent[root(a)] = root(b)
+    n = len(garment.panel_names)
+    pp = garment.panel[garment.seams] if len(garment.seams) else np.zeros((0, 2), int)
+    pp = pp[np.isin(pp, idx).all(axis=1)]
+    _, piece = connected_components(coo_matrix((np.ones(len(pp)), (pp[:, 0], pp[:, 1])), shape=(n, n)),
+                                    directed=False)
     out: dict[int, list[int]] = {}
     for p in idx:
-        out.setdefault(root(p), []).append(p)
+        out.setdefault(int(piece[p]), []).append(p)
     return list(out.values())
-
-
-def _triangles(garment: Garment) -> np.ndarray:
-    q = garment.quads
-    return np.concatenate([garment.tris.reshape(-1, 3), q[:, [0, 1, 2]], q[:, [0, 2, 3]]]).astype(np.int64)
 
 
 def _axis(body_v: np.ndarray, body_f: np.ndarray, pts: np.ndarray) -> np.ndarray | None:
@@ -139,7 +131,7 @@ def part_girths(garment: Garment, x: np.ndarray, names: list[str], body_v: np.nd
     Tightest first."""
     from scipy.spatial import cKDTree
 
-    tris = _triangles(garment)
+    tris = garment.triangles().astype(np.int64)
     body_v = np.asarray(body_v, dtype=np.float64)
     body_f = np.asarray(body_f, dtype=np.int64)
     rings = []
