@@ -1187,7 +1187,8 @@ def test_a_crotch_seam_left_open_under_the_body_names_a_rise_too_short():
     """An open pair under mean_female's crotch (front and back 12 cm apart): with 25 cm of flat
     cloth from each side up its panel to the panel's top at 1.07 m (50 cm) against the body's
     ~80 cm through the crotch from there, the stall is said to be a rise too short, with both
-    lengths; with 45 cm each (90 cm) nothing is said; nor for a pair far from the crotch."""
+    lengths; with 45 cm each (90 cm) nothing is said; nor for a pair far from the crotch, nor for
+    one 2 cm from its panels' tops (no crotch seam hanging from a waist)."""
     from types import SimpleNamespace
 
     from engine.body import resolve_body
@@ -1217,6 +1218,8 @@ def test_a_crotch_seam_left_open_under_the_body_names_a_rise_too_short():
     assert abs(_crotch_length(bvh.verts, bvh.faces, xc, 1.07 - drop)[0] - 0.50) < 0.002
     assert crotch_fit_drop(bvh.verts, bvh.faces, 0.10, 1.07, xc, 0.05) is None  # (not within 5 cm)
     assert said(0.45) is None
+    # (a pair at its panels' tops -- a skirt level's side seam caught at crotch height -- is no rise)
+    assert said(0.02) is None
     aside = x.copy()
     aside[[0, 2], 0] += 0.15  # (the pair beside a thigh, not under the crotch)
     assert said(0.25, aside) is None

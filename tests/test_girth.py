@@ -135,3 +135,68 @@ def test_a_held_top_far_wider_than_the_body_is_said_to_stand_off_it():
     fits = _limb(0.36)  # (under a centimetre off it)
     assert stands_off(g, SimpleNamespace(vertices=fits[0], faces=fits[1]), x, ident, held, MeshBVH(*fits)) is None
     assert stands_off(g, body, x, ident, None, MeshBVH(*thin)) is None  # (not held: it would fall, not stand off)
+
+
+def _skirt_top(sewn_top: bool = False):
+    """Two rectangles sewn side to side into a tube 20 cm round, their tops labelled
+    'lower_interface' (a skirt with no waistband); sewn_top: a third panel sewn to the tops (a
+    waistband)."""
+    rect = {"vertices": [[0, 0], [WIDTH, 0], [WIDTH, DEPTH], [0, DEPTH]],
+            "edges": [{"endpoints": [0, 1]}, {"endpoints": [1, 2]},
+                      {"endpoints": [2, 3], "label": "lower_interface"}, {"endpoints": [3, 0]}]}
+    band = {"vertices": [[0, 0], [2 * WIDTH, 0], [2 * WIDTH, 2], [0, 2]],
+            "edges": [{"endpoints": [i, (i + 1) % 4]} for i in range(4)]}
+    panels = {"band_f": {**rect, "translation": [0, 0, 10]}, "band_b": {**rect, "translation": [0, 0, -10]}}
+    stitches = [[{"panel": "band_f", "edge": 1}, {"panel": "band_b", "edge": 3}],
+                [{"panel": "band_f", "edge": 3}, {"panel": "band_b", "edge": 1}]]
+    if sewn_top:
+        panels["wb"] = {**band, "translation": [0, 10, 0]}
+        stitches += [[{"panel": "wb", "edge": 0}, {"panel": "band_f", "edge": 2}]]
+    return build_garment(PatternSpec.model_validate({"pattern": {"panels": panels, "stitches": stitches}}), h=0.01)
+
+
+def test_a_held_top_far_wider_than_the_body_is_gathered_onto_an_elastic():
+    """engine.scene.attach.top_elastic: a skirt's held top sewn to nothing and cut more than
+    ELASTIC_PAST longer round than the body where it is held gets an elastic ELASTIC_EASE longer
+    round than the body (its cloth read flat along the top: 20 cm); one cut to fit, or sewn to a
+    waistband, gets none."""
+    from types import SimpleNamespace
+
+    from engine.scene.attach import ELASTIC_EASE, top_elastic
+
+    g = _skirt_top()
+    g.positions[:] = _wrapped(g, 0.20 / (2 * np.pi), gap=0.0)
+    top = g.labelled["lower_interface"]
+    y = float(np.median(g.positions[top, 1]))
+    thin = _limb(0.12)
+    body = SimpleNamespace(vertices=thin[0] + [0.0, y, 0.0], faces=thin[1])
+    e = top_elastic(g, body, top)
+    assert e is not None and abs(e.cloth - 0.20) < 1e-9 and abs(e.body - 0.12) < 0.003, e
+    assert abs(e.factor * e.cloth - (1 + ELASTIC_EASE) * e.body) < 1e-9
+    assert "cut 20 cm round with no waistband where the body is 12 cm round, is gathered onto an elastic 12 cm" \
+        in e.note, e.note
+    fits = _limb(0.19)  # (within ELASTIC_PAST of the top: cut to fit, no elastic)
+    assert top_elastic(g, SimpleNamespace(vertices=fits[0] + [0.0, y, 0.0], faces=fits[1]), top) is None
+    sewn = _skirt_top(sewn_top=True)  # (its top sewn to a band: the band holds it)
+    assert top_elastic(sewn, body, sewn.labelled["lower_interface"]) is None
+
+
+def test_an_elastic_shortens_the_edge_it_is_sewn_into_not_the_strain_measured_there():
+    """engine.cloth.model.with_elastic: the springs between two of the edge's vertices rest at the
+    elastic's share of their length, the strain limit still measures them from their full length
+    (at it, 0 % strain), and every other spring is as it was."""
+    from engine.cloth.fabrics import get_fabric
+    from engine.cloth.model import FLEXION, build_model, spring_strains, with_elastic
+
+    g = _skirt_top()
+    model = build_model(g.uv, g.panel, g.lattice, g.quads, g.tris, g.seams, get_fabric("cotton"), 0.01)
+    top = g.labelled["lower_interface"]
+    out = with_elastic(model, top, 0.6)
+    on = np.isin(model.springs, top).all(axis=1)
+    assert on.sum() == 2 * WIDTH  # (each half's top: 10 springs of 1 cm)
+    np.testing.assert_allclose(out.rest[on], 0.6 * model.rest[on])
+    np.testing.assert_array_equal(out.rest[~on], model.rest[~on])
+    np.testing.assert_allclose(out.limit_rest, model.limit_rest)
+    flat = np.c_[g.uv[:, 0], np.zeros(len(g.uv)), g.uv[:, 1]]  # (every spring at its full length)
+    assert abs(spring_strains(out, flat)[1]).max() < 1e-9
+    assert (out.kind[on] != FLEXION).all()

@@ -97,6 +97,7 @@ class Attachment:
     normals: np.ndarray  # (K, 3) unit: the side of the plane the vertex is kept on
     tau: np.ndarray  # (K,) s: a vertex behind its plane is brought back in this time ...
     vmax: np.ndarray  # (K,) m/s: ... at most this fast
+    elastic: object = None  # engine.scene.attach.Elastic: the held top gathered onto an elastic, or None
 
 
 @dataclass

@@ -456,6 +456,22 @@ def _biased(model: ClothModel, bias: np.ndarray | None, allow: np.ndarray | None
     return model
 
 
+def with_elastic(model: ClothModel, vertices: np.ndarray, factor: float) -> ClothModel:
+    """The model with an edge gathered onto an elastic: the springs between two of `vertices`
+    (the edge's own run) `factor` x as long at rest, so the cloth along it gathers as the elastic
+    pulls it in, and still measured by the strain limit (and the reported strain) from their full
+    length (ClothModel.allow): an elastic stretched back to the cloth's own length is not the cloth
+    stretched; past it, it is."""
+    if not (0.0 < factor <= 1.0):
+        raise InputError(f"elastic factor {factor}: use 0 .. 1 (the elastic's length / the cloth's)")
+    on = np.zeros(model.n, dtype=bool)
+    on[vertices] = True
+    edge = on[model.springs[:, 0]] & on[model.springs[:, 1]]
+    allow = model.allow if model.allow is not None else np.ones(len(model.rest))
+    return _biased(replace(model, rest=np.where(edge, model.rest * factor, model.rest)), model.bias,
+                   np.where(edge & (model.kind != FLEXION), allow / factor, allow))
+
+
 def with_stiffness(model: ClothModel, factor: float, damping_cap: float | None = None) -> ClothModel:
     """The model with its stretch and shear springs `factor` x as stiff (flexion unchanged: it is
     the fabric's bending), the spring damping and the eq. 4 bound following (dt ~ 1 / sqrt(factor)

@@ -7,9 +7,14 @@ constraint) for its first 400 frames, about its whole simulation. Here the same
 collar's, further out than) where the placement put it -- the pattern's own placement on the
 body it was made for, else the one carried onto this body by its landmarks
 (engine.garment.place) -- while the garment is sewn and draped: a skirt with no waistband is
-held at its waist as its tie or elastic would hold it."""
+held at its waist as its tie or elastic would hold it. Such a top with no waistband, cut far
+wider round than the body where it is held (GarmentCode's rectangle and flared skirts), is
+gathered onto an elastic (Elastic), as a maker sews one: held alone it stood off the body as a
+tube."""
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -23,6 +28,27 @@ HOLD = {"lower_interface": (0.05, 1.0), "strapless_top": (0.05, 1.0), "right_col
         "left_collar": (0.1, 0.3)}
 SLACK = 0.01  # m: a held vertex may settle this far below (outside) where it was placed
 NECK_INSIDE = 0.01  # m: a collar's ends kept no further out than this inside the neck's half width
+# a held top sewn to nothing, this much longer round than the body where it is held, is gathered
+# onto an elastic ELASTIC_EASE longer round than the body there (top_elastic)
+ELASTIC_PAST = 0.10
+ELASTIC_EASE = 0.03
+
+
+@dataclass(frozen=True)
+class Elastic:
+    """An elastic sewn into a garment's held top (engine.cloth.model.with_elastic on its model)."""
+
+    vertices: np.ndarray  # (K,) the top's vertices (unsewn)
+    factor: float  # the elastic's length / the cloth's along the top
+    cloth: float  # m: the cloth round the top
+    body: float  # m: the body round where it is held
+
+    @property
+    def note(self) -> str:
+        return (f"its top ('lower_interface'), cut {100 * self.cloth:.0f} cm round with no waistband where the "
+                f"body is {100 * self.body:.0f} cm round, is gathered onto an elastic "
+                f"{100 * self.factor * self.cloth:.0f} cm round, as a maker would sew it (held as cut, it would "
+                "stand off the body)")
 
 
 def attachment(garment: Garment, body: Body) -> tuple[Attachment | None, str | None]:
@@ -42,10 +68,13 @@ def attachment(garment: Garment, body: Body) -> tuple[Attachment | None, str | N
         vmax.append(np.full(len(v), HOLD[label][1]))
         said.append(f"'{label}' {what}")
 
+    elastic = None
     for label in ("lower_interface", "strapless_top"):
         v = garment.labelled.get(label)
         if v is not None and len(v) and _round_body(body, x[v]):
             hold(label, v, x[v] - [0.0, SLACK, 0.0], (0.0, 1.0, 0.0), "from sliding down")
+            if label == "lower_interface":
+                elastic = top_elastic(garment, body, v)
     collar = [lb for lb in ("right_collar", "left_collar") if len(garment.labelled.get(lb, ()))]
     if collar:
         try:  # the neck's half width just above the shoulders: the bound a collar end keeps inside
@@ -64,8 +93,36 @@ def attachment(garment: Garment, body: Body) -> tuple[Attachment | None, str | N
         return None, None
     att = Attachment(vertices=np.concatenate(idx).astype(np.int64), points=np.concatenate(points),
                      normals=np.concatenate(normals).astype(np.float64), tau=np.concatenate(tau),
-                     vmax=np.concatenate(vmax))
-    return att, f"kept {', '.join(said)} while sewn and draped, as GarmentCode's simulator holds them"
+                     vmax=np.concatenate(vmax), elastic=elastic)
+    return att, (f"kept {', '.join(said)} while sewn and draped, as GarmentCode's simulator holds them"
+                 + (f"; {elastic.note}" if elastic is not None else ""))
+
+
+def top_elastic(garment: Garment, body: Body, v: np.ndarray) -> Elastic | None:
+    """The elastic of a held top (v: its vertices) sewn to nothing -- no waistband, no bodice --
+    and cut more than ELASTIC_PAST longer round than the body where it is held (its cloth along
+    the top, flat, against the hull of the body's section at its height): one ELASTIC_EASE longer
+    round than the body there. None: sewn, or cut to fit."""
+    from engine.body.measure import slice_pieces
+
+    if np.isin(v, garment.seams).mean() > 0.5:  # (sewn to a waistband or bodice: they hold it)
+        return None
+    on = np.zeros(garment.n_vertices, dtype=bool)
+    on[v] = True
+    edges = np.concatenate([np.stack([f, np.roll(f, -1, axis=1)], axis=-1).reshape(-1, 2)
+                            for f in (garment.quads, garment.tris) if len(f)])
+    edges = np.unique(np.sort(edges[on[edges[:, 0]] & on[edges[:, 1]]], axis=1), axis=0)
+    cloth = float(np.linalg.norm(garment.uv[edges[:, 0]] - garment.uv[edges[:, 1]], axis=1).sum())
+    p = garment.positions[v]
+    pieces = slice_pieces(body.vertices, body.faces, float(np.median(p[:, 1])))
+    if not pieces or cloth <= 0.0:
+        return None
+    mid = p[:, [0, 2]].mean(axis=0)
+    girth = min(pieces, key=lambda q: float(np.linalg.norm(q.centroid - mid))).hull_perimeter
+    if not (girth > 0.0 and cloth > (1.0 + ELASTIC_PAST) * girth):
+        return None
+    return Elastic(vertices=np.asarray(v, dtype=np.int64), factor=(1.0 + ELASTIC_EASE) * girth / cloth,
+                   cloth=cloth, body=girth)
 
 
 def _round_body(body: Body, p: np.ndarray) -> bool:
@@ -87,7 +144,7 @@ def welded(att: Attachment | None, vertex_map: np.ndarray) -> Attachment | None:
         return None
     new, first = np.unique(vertex_map[att.vertices], return_index=True)
     return Attachment(vertices=new.astype(np.int64), points=att.points[first], normals=att.normals[first],
-                      tau=att.tau[first], vmax=att.vmax[first])
+                      tau=att.tau[first], vmax=att.vmax[first])  # (an elastic is in the welded model's springs)
 
 
 STANDS_OFF = 0.04  # m: a held top whose vertices ended this far from the body (median) stands off it

@@ -30,7 +30,7 @@ import numpy as np
 
 from engine.cloth.config import Attachment, Control, Sewing, StepConfig
 from engine.cloth.fabrics import FABRICS, get_fabric
-from engine.cloth.model import ClothModel, ClothState, build_model, spring_strains, weld_model
+from engine.cloth.model import ClothModel, ClothState, build_model, spring_strains, weld_model, with_elastic
 from engine.cloth.solver import ClothSolver, FireRelaxer
 from engine.cloth.welds import hold_welds, merge_map, seam_gaps
 from engine.collide.base import Collider
@@ -270,6 +270,8 @@ def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOpt
     model = build_model(garment.uv, garment.panel, garment.lattice, garment.quads, garment.tris, garment.seams,
                         get_fabric(request.fabric), _edge(garment), tuning.cloth,
                         panel_fabrics={names[n]: get_fabric(f) for n, f in (panel_fabrics or {}).items() if n in names})
+    if attachment is not None and attachment.elastic is not None:  # (a held top gathered onto an elastic)
+        model = with_elastic(model, attachment.elastic.vertices, attachment.elastic.factor)
     state = job.fresh_state()
     exempt = pass_through.vertices if pass_through is not None else None
     solver = job.solver(model, exempt)
@@ -686,6 +688,9 @@ CROTCH_NEAR = 0.06  # m: open pairs this near the body's centre plane ...
 CROTCH_BELOW = 0.08  # m: ... and this near the height of its crotch meet under it (_crotch_short)
 CROTCH_ACROSS = 2.0  # ... from front to back: across the middle, or this many times as far along z as x
 CROTCH_SHORT = 0.95  # the cloth's way through the crotch shorter than this share of the body's
+# a pair whose cloth reaches less than this up both its panels to their tops is no crotch seam hanging
+# from a waist (a skirt level's side seam caught at crotch height): no rise to lengthen, none lowered
+CROTCH_MIN_REACH = 0.05  # m
 
 
 def sagittal_length(verts: np.ndarray, faces: np.ndarray, x0: float, top: float) -> tuple[float, float]:
@@ -781,7 +786,8 @@ def _crotch_short(job: _Dressing, state: ClothState, welded: np.ndarray) -> tupl
             tops.append(float(x[top, 1].mean()))
         y_top = min(tops)
         body_len, _ = _crotch_length(verts, faces, xc, y_top)
-        if body_len > 0 and reach < CROTCH_SHORT * body_len and (worst is None or reach / body_len < worst[0]):
+        if body_len > 0 and CROTCH_MIN_REACH <= reach < CROTCH_SHORT * body_len and \
+                (worst is None or reach / body_len < worst[0]):
             worst = (reach / body_len, reach, body_len, y_top)
     if worst is None:
         return None, None

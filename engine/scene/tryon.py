@@ -512,7 +512,8 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
                          "why": sew_note or ("asked for" if tuning.sew.friction else "the panels slide into place")},
         "tight": bool(res.strain_max > fab.strain_threshold + TIGHT),
         "warnings": garment.warnings + hang_warnings(shift, crossing_hint(garment), shrunk, fell) + [
-            w for w in [stands_off(garment, body, res.positions, res.vertex_map, held, bvh)] if w] + fit_warnings(res.strain_max, fab, res.settled,
+            w for w in [held.elastic.note if held is not None and held.elastic is not None else None,
+                        stands_off(garment, body, res.positions, res.vertex_map, held, bvh)] if w] + fit_warnings(res.strain_max, fab, res.settled,
                                                                            tuning.drape.budget, pattern_file),
     }
     if lift is not None:
