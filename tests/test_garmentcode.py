@@ -769,7 +769,7 @@ def test_parts_still_held_in_the_knit_are_sewn_from_a_rib(monkeypatch):
             return "drape", {"tight": False, "warnings": [], "fabric_why": why}
         err = SimulationError(f"sewing stopped closing ({request.fabric})")
         err.open_panels = stalled_at[0]
-        err.small_part = 0.3 if not parts else None  # (the knits: a part too small, on to the next)
+        err.small_part = 0.3 if request.fabric != "cotton" else None  # (the knits: a part too small, on to the next)
         raise err
 
     monkeypatch.setattr(tryon, "_run_tryon", scripted)
@@ -787,6 +787,51 @@ def test_parts_still_held_in_the_knit_are_sewn_from_a_rib(monkeypatch):
         tryon.run_tryon(body, spec)
     assert [c[0] for c in calls] == ["cotton", "cotton", "jersey", "stretch_knit"], calls
     assert all(parts.get("cuff_l") != "rib_knit" for _, parts in calls), calls
+    # (the knits keep the parts found in a stretchier knit than theirs: jersey, not stretch_knit)
+    assert calls[2][1] == {"cuff_l": "stretch_knit", "band": "stretch_knit"} and calls[3][1] == {}, calls
+
+
+def test_parts_the_rib_drape_holds_next_are_sewn_from_a_knit(monkeypatch):
+    """Cuffs held in cotton, stalled open in stretch_knit, sewn on in rib_knit -- and that drape
+    holds the next part at cotton's limit, the cuff's flared skirt below its band (mean_female
+    193_011): once more with that part in stretch_knit, the cuffs kept in rib; the report names
+    both. Where that fails too, the whole garment goes to the knits with the parts found held in a
+    stretchier knit than theirs kept (a knit with rib cuffs: the rib in jersey and in
+    stretch_knit, the stretch_knit part in jersey only)."""
+    import engine.scene.tryon as tryon
+    from engine.body import resolve_body
+    from engine.errors import SimulationError
+    from engine.pattern.io import load_pattern
+
+    calls, frill_fits = [], [True]
+
+    def scripted(body, spec, request, tuning, why, panel_fabrics=None, **kw):
+        parts = dict(panel_fabrics or {})
+        calls.append((request.fabric, parts))
+        if request.fabric == "cotton" and not parts or parts.get("cuff_l") == "rib_knit" and "frill_l" not in parts:
+            err = SimulationError(f"the garment is too small for this body ({request.fabric})")
+            err.stretched_at, err.strain, err.gave_up = (0, 1, 0), 0.3, True
+            err.tight_panels = ["frill_l"] if parts else ["cuff_l"]
+            raise err
+        if parts.get("cuff_l") == "stretch_knit" or not frill_fits[0]:
+            err = SimulationError(f"sewing stopped closing ({request.fabric})")
+            err.open_panels, err.small_part = ["cuff_l"], 0.3
+            raise err
+        return "drape", {"tight": False, "warnings": [], "fabric_why": why}
+
+    monkeypatch.setattr(tryon, "_run_tryon", scripted)
+    body, spec = resolve_body(str(BODY)), load_pattern(DESIGNS / "mean_female_11_026_specification.json")
+    _, rep = tryon.run_tryon(body, spec)
+    sk, rib = "stretch_knit", "rib_knit"
+    assert calls == [("cotton", {}), ("cotton", {"cuff_l": sk}), ("cotton", {"cuff_l": rib}),
+                     ("cotton", {"cuff_l": rib, "frill_l": sk})], calls
+    assert rep["warnings"][0].startswith("'cuff_l' sewn from rib_knit, a knit, and 'frill_l' sewn from stretch_knit"), \
+        rep["warnings"]
+    calls.clear()
+    frill_fits[0] = False
+    with pytest.raises(SimulationError):
+        tryon.run_tryon(body, spec)
+    assert calls[4:] == [("jersey", {"cuff_l": rib, "frill_l": sk}), ("stretch_knit", {"cuff_l": rib})], calls
 
 
 def test_a_skirt_alone_is_judged_by_its_waist():

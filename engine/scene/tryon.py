@@ -145,7 +145,9 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     knit -- and, where that names parts again, once more with those added; where the last names
     no new parts but held those in PART_KNIT again, or its seams stalled open at them, once more
     with those in RIB_KNIT (a rib stretches twice as far round; GarmentCode cuts some cuffs to the
-    wrist's girth on sleeves that end on the forearm), the others kept in PART_KNIT. If none
+    wrist's girth on sleeves that end on the forearm), the others kept in PART_KNIT, and where
+    that names parts it had not, once more with those in PART_KNIT. The knits' drapes keep the
+    parts found in a stretchier knit than theirs (a knit top whose cuffs need a rib). If none
     fits, the first fabric's drape or the stretchiest knit's (tight, noted) or the first's refusal
     stands. Where the first drape was placed lower for a short rise (_run_tryon's drop), every
     later one is placed as low."""
@@ -179,21 +181,24 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     parts: dict[str, str] = {}
     out = first
     areas = _panel_areas(spec)
-    for k in range(PART_ROUNDS + 1):
+    ribbed = False
+    for k in range(PART_ROUNDS + 2):
         held = _tight_parts(out)
         named = [n for n in held if n not in parts]
         if k == PART_ROUNDS:  # (the parts held in PART_KNIT too, or stalled open, and no others: in a rib)
             rib = set(held) | (set(getattr(out, "open_panels", ())) & set(parts))
             if not parts or named or not rib:
                 break
-            knit, parts = RIB_KNIT, {n: RIB_KNIT if n in rib else f for n, f in parts.items()}
+            knit, trial, ribbed = RIB_KNIT, {n: RIB_KNIT if n in rib else f for n, f in parts.items()}, True
+        elif k > PART_ROUNDS and not (ribbed and named):
+            break
         elif not named:
             continue  # (the parts held again, or no parts: the rib, or the knits below)
-        else:
-            knit = PART_KNIT
-            parts.update({n: PART_KNIT for n in named})
-        if sum(areas.get(n, 0.0) for n in parts) > PART_SHARE * sum(areas.values()):
+        else:  # (or, sewn on in a rib, the parts it held next: a cuff's flared skirt below its band)
+            knit, trial = PART_KNIT, {**parts, **{n: PART_KNIT for n in named}}
+        if sum(areas.get(n, 0.0) for n in trial) > PART_SHARE * sum(areas.values()):
             break  # (most of the garment held: it is a garment for a knit, below)
+        parts = trial
         say("sewing", 0.0, f"{said[0]}: draping it again with {_in_fabrics(parts)}")
         out = attempt(request, quick, fabric_why, parts)
         if _fits(out):
@@ -217,11 +222,15 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
             said[0] = _how_it_fit(fab, first)
         why = (f"the pattern's fit: {'; '.join(said)}: cut with no ease there, it is a garment for a knit "
                f"(choose the fabric {fab.name} to see it in {fab.name})")
-        say("sewing", 0.0, f"{said[-1]}: draping it again in {knit.name}, a knit")
-        out = attempt(request.model_copy(update={"fabric": knit.name}), tuning if last else quick, why)
+        # (with the parts found held sewn from a stretchier knit still: a knit top with rib cuffs)
+        keep = {n: f for n, f in parts.items() if get_fabric(f).strain_threshold > knit.strain_threshold}
+        say("sewing", 0.0, f"{said[-1]}: draping it again in {knit.name}, a knit"
+                           + (f", {_in_fabrics(keep, 'sewn from')}" if keep else ""))
+        out = attempt(request.model_copy(update={"fabric": knit.name}), tuning if last else quick, why, keep or None)
         tried.append((knit, out))
         if _fits(out):
-            out[1]["warnings"].append(f"draped in {knit.name}, a knit: {'; '.join(said)}")
+            out[1]["warnings"].append(f"draped in {knit.name}, a knit" + (f", {_in_fabrics(keep, 'sewn from')}"
+                                                                          if keep else "") + f": {'; '.join(said)}")
             return out
         if isinstance(out, Exception) and not _no_fit(out):
             break  # (a knit that fails for another reason: a stretchier one would too)
