@@ -1183,6 +1183,24 @@ def test_the_outline_through_the_crotch_is_measured_below_a_height():
     assert sagittal_length(np.asarray(box.vertices), np.asarray(box.faces), 0.3, 0.5)[0] == 0.0  # (misses it)
 
 
+def test_a_stall_is_the_small_parts_only_where_its_seams_are_open_about_as_wide():
+    """engine.scene.drape._stalls_at: seams that stall beside a part too small (a cuff stretched
+    far past the fabric) are that part's stall where a seam of it is open at least half as wide as
+    the widest -- the fabric ladder then sews the part from a knit; a skirt seam 22 cm open beside
+    a cuff 7 cm open stalls elsewhere (no knit closes it), and a part whose seams closed is not
+    the stall."""
+    from types import SimpleNamespace
+
+    from engine.scene.drape import _stalls_at
+
+    g = SimpleNamespace(panel=np.array([0, 0, 1, 1, 2, 2, 3, 3]), seams=np.array([[0, 2], [1, 3], [4, 6], [5, 7]]),
+                        panel_names=["cuff_f", "cuff_b", "skirt_f", "skirt_b"])
+    open_ = np.zeros(4, dtype=bool)
+    assert _stalls_at(g, open_, np.array([0.05, 0.04, 0.06, 0.02]), ["cuff_f"])  # (5 cm at the cuff, 6 widest)
+    assert not _stalls_at(g, open_, np.array([0.07, 0.02, 0.22, 0.10]), ["cuff_f", "cuff_b"])  # (7 of 22)
+    assert not _stalls_at(g, np.array([True, True, False, False]), np.array([0.0, 0.0, 0.06, 0.02]), ["cuff_f"])
+
+
 def test_a_crotch_seam_left_open_under_the_body_names_a_rise_too_short():
     """An open pair under mean_female's crotch (front and back 12 cm apart): with 25 cm of flat
     cloth from each side up its panel to the panel's top at 1.07 m (50 cm) against the body's
