@@ -179,6 +179,17 @@ def test_a_held_top_far_wider_than_the_body_is_gathered_onto_an_elastic():
     assert top_elastic(g, SimpleNamespace(vertices=fits[0] + [0.0, y, 0.0], faces=fits[1]), top) is None
     sewn = _skirt_top(sewn_top=True)  # (its top sewn to a band: the band holds it)
     assert top_elastic(sewn, body, sewn.labelled["lower_interface"]) is None
+    # held on its elastic from below and from above (an elastic pulled in rides up a body that
+    # narrows above it), both planes kept once its seams are welded
+    from engine.cloth.welds import merge_map
+    from engine.scene.attach import attachment, welded
+
+    att, note = attachment(g, body)
+    assert att.elastic is not None and "gathered onto an elastic" in note, note
+    for a in (att, welded(att, merge_map(len(g.positions), g.seams.astype(np.int64)))):
+        up, down = a.normals[:, 1] > 0.5, a.normals[:, 1] < -0.5
+        assert up.sum() == down.sum() and set(a.vertices[up]) == set(a.vertices[down]), (up.sum(), down.sum())
+        assert (a.points[down, 1] > a.points[up, 1]).all()
 
 
 def test_an_elastic_shortens_the_edge_it_is_sewn_into_not_the_strain_measured_there():

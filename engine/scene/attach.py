@@ -73,8 +73,10 @@ def attachment(garment: Garment, body: Body) -> tuple[Attachment | None, str | N
         v = garment.labelled.get(label)
         if v is not None and len(v) and _round_body(body, x[v]):
             hold(label, v, x[v] - [0.0, SLACK, 0.0], (0.0, 1.0, 0.0), "from sliding down")
-            if label == "lower_interface":
-                elastic = top_elastic(garment, body, v)
+            if label == "lower_interface" and (elastic := top_elastic(garment, body, v)) is not None:
+                # (nor above: an elastic pulled in rides up a body that narrows above where it is put
+                # -- a band 3 cm deep climbed from the waist to under the bust -- where a worn one stays)
+                hold(label, v, x[v] + [0.0, SLACK, 0.0], (0.0, -1.0, 0.0), "on an elastic from riding up")
     collar = [lb for lb in ("right_collar", "left_collar") if len(garment.labelled.get(lb, ()))]
     if collar:
         try:  # the neck's half width just above the shoulders: the bound a collar end keeps inside
@@ -142,9 +144,13 @@ def welded(att: Attachment | None, vertex_map: np.ndarray) -> Attachment | None:
     """The attachment on the welded cloth (vertex_map: old -> new vertex), each vertex once."""
     if att is None:
         return None
-    new, first = np.unique(vertex_map[att.vertices], return_index=True)
-    return Attachment(vertices=new.astype(np.int64), points=att.points[first], normals=att.normals[first],
-                      tau=att.tau[first], vmax=att.vmax[first])  # (an elastic is in the welded model's springs)
+    # (each welded vertex once per plane: a vertex held from both sides keeps both)
+    keys = np.c_[vertex_map[att.vertices], np.round(att.normals, 6)]
+    _, first = np.unique(keys, axis=0, return_index=True)
+    first = np.sort(first)
+    return Attachment(vertices=vertex_map[att.vertices[first]].astype(np.int64), points=att.points[first],
+                      normals=att.normals[first], tau=att.tau[first],
+                      vmax=att.vmax[first])  # (an elastic is in the welded model's springs)
 
 
 STANDS_OFF = 0.04  # m: a held top whose vertices ended this far from the body (median) stands off it
