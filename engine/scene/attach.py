@@ -76,7 +76,8 @@ def attachment(garment: Garment, body: Body) -> tuple[Attachment | None, str | N
             if label == "lower_interface" and (elastic := top_elastic(garment, body, v)) is not None:
                 # (nor above: an elastic pulled in rides up a body that narrows above where it is put
                 # -- a band 3 cm deep climbed from the waist to under the bust -- where a worn one stays)
-                hold(label, v, x[v] + [0.0, SLACK, 0.0], (0.0, -1.0, 0.0), "on an elastic from riding up")
+                hold(label, v, x[v] + [0.0, SLACK, 0.0], (0.0, -1.0, 0.0), "")
+                said.pop()  # (said with the elastic: GarmentCode's simulator holds no edge so)
     collar = [lb for lb in ("right_collar", "left_collar") if len(garment.labelled.get(lb, ()))]
     if collar:
         try:  # the neck's half width just above the shoulders: the bound a collar end keeps inside
@@ -97,7 +98,7 @@ def attachment(garment: Garment, body: Body) -> tuple[Attachment | None, str | N
                      normals=np.concatenate(normals).astype(np.float64), tau=np.concatenate(tau),
                      vmax=np.concatenate(vmax), elastic=elastic)
     return att, (f"kept {', '.join(said)} while sewn and draped, as GarmentCode's simulator holds them"
-                 + (f"; {elastic.note}" if elastic is not None else ""))
+                 + (f"; {elastic.note}, and held there from riding up" if elastic is not None else ""))
 
 
 def top_elastic(garment: Garment, body: Body, v: np.ndarray) -> Elastic | None:
