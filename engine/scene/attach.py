@@ -106,9 +106,7 @@ def top_elastic(garment: Garment, body: Body, v: np.ndarray) -> Elastic | None:
     and cut more than ELASTIC_PAST longer round than the body where it is held (its cloth along
     the top, flat, against the hull of the body's section at its height): one ELASTIC_EASE longer
     round than the body there. None: sewn, or cut to fit."""
-    from engine.body.measure import slice_pieces
-
-    if np.isin(v, garment.seams).mean() > 0.5:  # (sewn to a waistband or bodice: they hold it)
+    if _sewn_top(garment, v):  # (sewn to a waistband or bodice: they hold it)
         return None
     on = np.zeros(garment.n_vertices, dtype=bool)
     on[v] = True
@@ -116,16 +114,28 @@ def top_elastic(garment: Garment, body: Body, v: np.ndarray) -> Elastic | None:
                             for f in (garment.quads, garment.tris) if len(f)])
     edges = np.unique(np.sort(edges[on[edges[:, 0]] & on[edges[:, 1]]], axis=1), axis=0)
     cloth = float(np.linalg.norm(garment.uv[edges[:, 0]] - garment.uv[edges[:, 1]], axis=1).sum())
-    p = garment.positions[v]
-    pieces = slice_pieces(body.vertices, body.faces, float(np.median(p[:, 1])))
-    if not pieces or cloth <= 0.0:
-        return None
-    mid = p[:, [0, 2]].mean(axis=0)
-    girth = min(pieces, key=lambda q: float(np.linalg.norm(q.centroid - mid))).hull_perimeter
+    girth = _girth_at(body, garment.positions[v])
     if not (girth > 0.0 and cloth > (1.0 + ELASTIC_PAST) * girth):
         return None
     return Elastic(vertices=np.asarray(v, dtype=np.int64), factor=(1.0 + ELASTIC_EASE) * girth / cloth,
                    cloth=cloth, body=girth)
+
+
+def _sewn_top(garment: Garment, v: np.ndarray) -> bool:
+    """Whether most of a labelled top's vertices are sewn to another part (a waistband, a bodice)."""
+    return bool(np.isin(v, garment.seams).mean() > 0.5)
+
+
+def _girth_at(body: Body, p: np.ndarray) -> float:
+    """The body's girth (hull of its section) at the median height of the points p, the section
+    nearest their middle (the trunk, not an arm beside it); 0 where the plane misses the body."""
+    from engine.body.measure import slice_pieces
+
+    pieces = slice_pieces(body.vertices, body.faces, float(np.median(p[:, 1])))
+    if not pieces:
+        return 0.0
+    mid = p[:, [0, 2]].mean(axis=0)
+    return float(min(pieces, key=lambda q: float(np.linalg.norm(q.centroid - mid))).hull_perimeter)
 
 
 def _round_body(body: Body, p: np.ndarray) -> bool:
@@ -166,20 +176,18 @@ def stands_off(garment: Garment, body: Body, draped: np.ndarray, vertex_map: np.
     tie, elastic or a band). None: none held, its top sewn to another part (a dress's skirt to its
     bodice), or it lies on the body (a ruffled waistband's hull is wider round than the waist, and
     it lies on it: judged by distance, not by girth)."""
-    from engine.body.measure import hull_perimeter, slice_pieces
+    from engine.body.measure import hull_perimeter
 
     v = garment.labelled.get("lower_interface")
     if held is None or v is None or not len(v) or vertex_map is None or not np.isin(v, held.vertices).any():
         return None
-    if np.isin(v, garment.seams).mean() > 0.5:  # (sewn to a bodice: the dress hangs from its shoulders)
+    if _sewn_top(garment, v):  # (sewn to a bodice: the dress hangs from its shoulders)
         return None
     p = draped[vertex_map[v]]
     off = float(np.median(bvh.signed_distance(p, max_distance=4 * STANDS_OFF)))
     if off < STANDS_OFF:
         return None
-    pieces = slice_pieces(body.vertices, body.faces, float(np.median(p[:, 1])))
-    mid = p[:, [0, 2]].mean(axis=0)
-    girth = (min(pieces, key=lambda q: float(np.linalg.norm(q.centroid - mid))).hull_perimeter if pieces else 0.0)
+    girth = _girth_at(body, p)
     round_ = (f"is {100 * hull_perimeter(p[:, [0, 2]]):.0f} cm round where the body is {100 * girth:.0f} cm round, "
               if girth > 0.0 else "")
     return (f"the garment's top ('lower_interface') {round_}{100 * off:.0f} cm off the body: held there as "
