@@ -163,6 +163,21 @@ def _progress_printer():
     return prog, update
 
 
+TIME_LIMIT_HELP = ("Stop dressing after this many seconds of wall time (sewing and draping, every fabric "
+                   "tried) and say where it was; default: no limit (the service's is TRYON_DRESS_SECONDS).")
+
+
+def _limited(update, seconds: Optional[float]):
+    """The progress display, stopping the dressing after `seconds` (None: no limit)."""
+    from engine.scene.drape import time_limited
+
+    if seconds is None:
+        return update
+    if not (seconds > 0 and seconds < float("inf")):
+        _fail(f"--time-limit {seconds:g}: give a positive number of seconds", 2)
+    return time_limited(update, seconds, "--time-limit")
+
+
 # the request's fields by their options here (engine.scene.request.TryOnRequest)
 OPTION_NAMES = {"resolution_cm": "--resolution", "texel_mm": "--texel", "dt_ms": "--dt",
                 "reuse_maps": "--reuse-maps/--maps-every-frame", "walk_stiffness": "--walk-stiffness"}
@@ -213,7 +228,8 @@ def request_options(fields: tuple[str, ...]):
 def drape_cmd(request, body: str = typer.Option(..., "--body", help=BODY_HELP),
               out: Path = typer.Option(Path("out/drape"), "--out", help="Output directory."),
               up: Optional[str] = typer.Option(None, "--up", help=UP_HELP),
-              front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP)):
+              front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP),
+              time_limit: Optional[float] = typer.Option(None, "--time-limit", help=TIME_LIMIT_HELP)):
     """Dress a standing body: mesh the pattern, place it, sew, drape; write scene.glb, garment.obj,
     front/side/back.png, report.json and the pattern dressed (pattern.json, pattern.svg)."""
 
@@ -225,7 +241,7 @@ def drape_cmd(request, body: str = typer.Option(..., "--body", help=BODY_HELP),
         prog, update = _progress_printer()
         with prog:
             try:
-                res, report = dress_request(b, request, progress=update, note=_size_note)
+                res, report = dress_request(b, request, progress=_limited(update, time_limit), note=_size_note)
             except SimulationError as e:
                 _failed_picture(out, b, e)
                 raise
@@ -264,7 +280,8 @@ def _failed_picture(out: Path, b, e) -> None:
 def walk_cmd(request, body: str = typer.Option(..., "--body", help=BODY_HELP),
              out: Path = typer.Option(Path("out/walk"), "--out", help="Output directory."),
              up: Optional[str] = typer.Option(None, "--up", help=UP_HELP),
-             front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP)):
+             front: Optional[str] = typer.Option(None, "--front", help=FRONT_HELP),
+             time_limit: Optional[float] = typer.Option(None, "--time-limit", help=TIME_LIMIT_HELP)):
     """Dress a body (as `tryon drape`), then walk it: write anim.glb (plays in any glTF viewer),
     strip.png (frames side by side) and report.json. BODY may also be an animation: a .zip of OBJ
     frames (one mesh topology) played at --fps, or a .glb with a morph-target or skinned animation
@@ -291,7 +308,7 @@ def walk_cmd(request, body: str = typer.Option(..., "--body", help=BODY_HELP),
             typer.echo(f"note: {walker.notes[-1]}", err=True)
         prog, update = _progress_printer()
         with prog:
-            res, report = dress_request(b, request, progress=update, note=_size_note)
+            res, report = dress_request(b, request, progress=_limited(update, time_limit), note=_size_note)
             # (a scan is dressed as loaded and walks fitted: see engine.scene.walk.walking_body)
             w = walk_cloth(walker, res, request, progress=update, track=track)
         full = walk_report(report, w.report)

@@ -22,6 +22,11 @@ class SimulationError(TryonError):
     """A simulation stage did not reach its goal (e.g. seams stayed open, energy blew up)."""
 
 
+class TimeLimitError(TryonError):
+    """A try-on ran past the wall-clock time it was given (engine.scene.drape.time_limited).
+    Not a SimulationError: the fabric ladder does not take it for a garment that did not fit."""
+
+
 # What malformed bytes make parsers and the libraries under them raise (trimesh, json, zipfile,
 # struct, NumPy, SciPy): at a parser's public entry they become one InputError.
 MALFORMED = (ValueError, TypeError, LookupError, AttributeError, ArithmeticError, RecursionError,

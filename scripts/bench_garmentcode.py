@@ -79,15 +79,18 @@ def reason(msg: str) -> str:
     return kind
 
 
-def drape_one(path: Path, body, request) -> dict:
+def drape_one(path: Path, body, request, limit: float | None = None) -> dict:
+    """One design's row; limit: the wall time its try-on may take (as the service's TRYON_DRESS_SECONDS)."""
     from engine.errors import TryonError
     from engine.pattern.io import load_pattern
+    from engine.scene.drape import time_limited
     from engine.scene.tryon import run_tryon
 
     t = time.perf_counter()
     row = {"design": path.name.removesuffix("_specification.json")}
     try:
-        res, rep = run_tryon(body, load_pattern(path), request, source=row["design"])
+        res, rep = run_tryon(body, load_pattern(path), request, source=row["design"],
+                             progress=time_limited(None, limit, "the benchmark's --time-limit") if limit else None)
     except TryonError as e:
         row.update(ok=False, wall=time.perf_counter() - t, error=str(e), reason=reason(str(e)),
                    picture=(getattr(e, "positions", None), getattr(e, "triangles", None)))
@@ -136,6 +139,9 @@ def main() -> None:
     ap.add_argument("--resolution", type=float, default=1.5, help="cloth edge, cm")
     ap.add_argument("--fabric", default=None, help="drape in this fabric (default: the try-on's default)")
     ap.add_argument("--out", type=Path, default=Path("out/bench_garmentcode"))
+    ap.add_argument("--time-limit", type=float, default=300.0,
+                    help="s a garment's try-on may take, then it fails (the service's TRYON_DRESS_SECONDS "
+                         "default); 0: none")
     a = ap.parse_args()
     if not (1 <= a.n <= 1000):
         sys.exit("--n: 1 .. 1000 designs")
@@ -149,7 +155,7 @@ def main() -> None:
     request = TryOnOptions(resolution_cm=a.resolution, **({"fabric": a.fabric} if a.fabric else {}))
     rows = []
     for p in paths:
-        r = drape_one(p, body, request)
+        r = drape_one(p, body, request, a.time_limit or None)
         rows.append(r)
         extra = (f"{r['vertices']} v, pen {r['pen_max']:.1f}/{r['pen_p99']:.1f} mm, strain {100 * r['strain']:.1f} %, "
                  f"folds {r['folds']}, {r['fabric']}{' + parts' if r['parts'] else ''}, "
@@ -164,7 +170,8 @@ def main() -> None:
             reasons.setdefault(r["reason"], []).append(r["design"])
     done = [r for r in rows if "vertices" in r]
     print(f"\n{len(rows)} designs on {a.body}, {a.resolution:g} cm cloth: {len(ok)} drape ({100 * len(ok) / max(1, len(rows)):.0f} %)")
-    print(f"wall time per garment: median {statistics.median(walls):.1f} s, p90 {np.percentile(walls, 90):.1f} s")
+    print(f"wall time per garment: median {statistics.median(walls):.1f} s, p90 {np.percentile(walls, 90):.1f} s"
+          + (f" (each stopped at {a.time_limit:g} s)" if a.time_limit else ""))
     if done:
         print(f"penetration max {max(r['pen_max'] for r in done):.2f} mm, p99 max {max(r['pen_p99'] for r in done):.2f} mm; "
               f"strain max {100 * max(r['strain'] for r in done):.1f} % (threshold {100 * done[0]['threshold']:.0f} %); "

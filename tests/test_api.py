@@ -489,7 +489,7 @@ def test_a_job_deleted_while_its_results_are_written_leaves_no_folder(tmp_path, 
         job = crud.claim(db, os.getpid(), 30.0)
         assert job["id"] == jid
 
-        def run(req, out, progress, live=None):
+        def run(req, out, progress, *_):
             tryons.delete(crud.get(db, "jobs", jid), settings, db)  # the user deletes it now
             out.mkdir(parents=True)
             (out / "garment.glb").write_bytes(b"x" * 100)
@@ -499,6 +499,27 @@ def test_a_job_deleted_while_its_results_are_written_leaves_no_folder(tmp_path, 
         worker.run_job(db, job, settings.data_dir)
         assert crud.get(db, "jobs", jid) is None
         assert not (settings.data_dir / "jobs" / jid).exists()
+
+
+def test_a_try_on_past_the_dressing_time_limit_fails_and_says_so(tmp_path):
+    """TRYON_DRESS_SECONDS: a try-on still dressing when its time is up stops there; the job fails
+    with the limit's name and where it was, not a run that goes on for a quarter of an hour."""
+    from app import crud
+    from app.queue import worker
+
+    settings = _settings(tmp_path)
+    assert settings.dress_seconds == 300  # (the default a shop gets)
+    with TestClient(create_app(settings, start_workers=False)) as c:
+        h = token(c)
+        jid = c.post("/api/tryons", json={"body": "default:female", "garment": "skirt"}, headers=h).json()["id"]
+        db = c.app.state.db
+        job = crud.claim(db, os.getpid(), 30.0)
+        worker.run_job(db, job, settings.data_dir, 30.0, dress_seconds=1e-3)
+        row = crud.get(db, "jobs", jid)
+        assert row["status"] == "failed"
+        assert "stopped after 0.001 s" in row["error"] and "TRYON_DRESS_SECONDS" in row["error"]
+        assert "while still" in row["error"]
+        assert not any((settings.data_dir / "jobs" / jid).glob("*/garment.glb"))  # (no half-written results)
 
 
 def test_worker_warm_up_loads_the_engine_and_never_raises(monkeypatch, capsys):

@@ -673,6 +673,44 @@ def test_a_stall_beside_a_part_too_small_is_sewn_again_in_the_knits(monkeypatch)
     assert calls == ["cotton"], calls
 
 
+def test_a_try_on_past_its_time_limit_stops_on_the_ladder_and_says_where(monkeypatch):
+    """The wall-time limit (engine.scene.drape.time_limited: the service's TRYON_DRESS_SECONDS,
+    `--time-limit`) raises from the progress report of whichever drape is running: the fabric
+    ladder does not take it for a garment that did not fit, so no further fabric is tried, and the
+    message names the limit and the stage it stopped in."""
+    import time
+
+    import engine.scene.tryon as tryon
+    from engine.body import resolve_body
+    from engine.errors import SimulationError, TimeLimitError
+    from engine.pattern.io import load_pattern
+    from engine.scene.drape import time_limited
+
+    calls = []
+
+    def scripted(body, spec, request, tuning, why, progress=None, **kw):
+        calls.append(request.fabric)
+        progress("sewing", 0.5, f"largest open seam gap 9.0 cm ({request.fabric})")
+        if request.fabric == "cotton":
+            err = SimulationError("sewing stopped closing (cotton)")
+            err.small_part = 0.31
+            raise err
+        time.sleep(0.05)  # (the knit's drape runs on past the limit)
+        progress("draping", 0.1, "drift 3.00 cm/s")
+        return "drape", {"tight": False, "warnings": [], "fabric_why": why}
+
+    monkeypatch.setattr(tryon, "_run_tryon", scripted)
+    body, spec = resolve_body(str(BODY)), load_pattern(DESIGNS / "mean_female_11_026_specification.json")
+    with pytest.raises(TimeLimitError, match=r"^stopped after 0\.03 s \(a test's limit\) while still draping "
+                                             r"\(largest open seam gap 9\.0 cm \(jersey\)\): "):
+        tryon.run_tryon(body, spec, progress=time_limited(None, 0.03, "a test's limit"))
+    assert calls == ["cotton", "jersey"], calls
+    said = []
+    limited = time_limited(lambda *a: said.append(a), 60.0, "a minute")
+    limited("sewing", 0.2, "gap 2 cm")  # (within its time: passed on)
+    assert said == [("sewing", 0.2, "gap 2 cm")]
+
+
 def test_a_drape_that_never_came_to_rest_at_the_fabrics_limit_is_draped_in_a_knit(monkeypatch):
     """A cotton drape under the tight mark that never settled, the strain guard holding it at the
     limit all along (mean_female 83_004: 5.8 % for the whole budget, shaking against the body),

@@ -8,6 +8,8 @@
     TRYON_WORKERS         worker processes (each runs one try-on at a time)     (1)
     TRYON_ATTEMPTS        how often a try-on cut off by a restart is started    (2)
     TRYON_LEASE_SECONDS   a running try-on whose worker is silent this long is started again (30)
+    TRYON_DRESS_SECONDS   wall time dressing one try-on may take (sewing, draping, every fabric
+                          tried); past it the try-on fails and says so             (300)
     TRYON_TOKENS          comma-separated API tokens accepted besides issued ones
     TRYON_SECRET          key the API tokens are stored hashed with        (random, DATA/secret.key)
     TRYON_LINK_SECONDS    how long a try-on's result and viewer links work      (3600)
@@ -47,6 +49,7 @@ class Settings(EngineSettings):
     workers: int = Field(1, ge=1, le=16)
     attempts: int = Field(2, ge=1, le=10)
     lease_seconds: float = Field(30.0, ge=2, le=3600)   # a job stays a worker's this long without a heartbeat
+    dress_seconds: float = Field(300.0, ge=5, le=86400)  # one try-on's dressing, wall time (then it fails)
     tokens: Annotated[list[str], NoDecode] = []
     secret: str | None = Field(None, repr=False)         # the key tokens are hashed with (else DATA/secret.key)
     link_seconds: float = Field(3600.0, gt=0)            # how long a job's result/viewer links work

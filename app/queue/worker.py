@@ -66,7 +66,7 @@ def worker_main(settings: Settings, parent: int, poll: float = 0.2) -> None:
                 time.sleep(poll)
                 continue
             warm = False
-            run_job(db, job, settings.data_dir, settings.lease_seconds)
+            run_job(db, job, settings.data_dir, settings.lease_seconds, settings.dress_seconds)
         except sqlite3.Error:  # a full disk or a locked database: the job's lease runs out and it is requeued
             traceback.print_exc()
             time.sleep(1.0)
@@ -139,9 +139,10 @@ def warm_up() -> dict:
     return {"seconds": time.perf_counter() - t0, "ok": ok}
 
 
-def run_job(db: DB, job: dict, data_dir: Path, lease: float = 30.0) -> None:
+def run_job(db: DB, job: dict, data_dir: Path, lease: float = 30.0, dress_seconds: float | None = None) -> None:
     """Run one claimed attempt: results written to its own folder, published by renaming it once
-    done, recorded only if this attempt still holds the job (fenced by the attempt number)."""
+    done, recorded only if this attempt still holds the job (fenced by the attempt number).
+    dress_seconds: the wall time its dressing may take (Settings.dress_seconds)."""
     jid, attempt = job["id"], job["attempts"]
     part = attempt_dir(data_dir, jid, attempt)
     beat = Heartbeat(db, jid, attempt, lease)
@@ -164,7 +165,7 @@ def run_job(db: DB, job: dict, data_dir: Path, lease: float = 30.0) -> None:
         crud.set_viewer_port(db, jid, port)
 
     try:
-        report = _run(json.loads(job["request"]), part, progress, live)
+        report = _run(json.loads(job["request"]), part, progress, live, dress_seconds)
         final = attempt_dir(data_dir, jid, attempt, partial=False)
         os.replace(part, final)
     except Exception as e:
@@ -207,7 +208,7 @@ def _failure(e: Exception) -> tuple[str, str]:
     return "failed", f"internal error ({type(e).__name__}: {e})"
 
 
-def _run(req: dict, out: Path, progress, live=None) -> dict:
+def _run(req: dict, out: Path, progress, live=None, dress_seconds: float | None = None) -> dict:
     from engine.body import resolve_body
 
     progress("body", 0.0, "loading the body")
@@ -234,12 +235,13 @@ def _run(req: dict, out: Path, progress, live=None) -> dict:
     try:
         if live is not None:
             live(view.port)
-        return _simulate(req, body, g, walking, out, progress, view, track, posed)
+        return _simulate(req, body, g, walking, out, progress, view, track, posed, dress_seconds)
     finally:
         view.close()
 
 
-def _simulate(req, body, g, walking, out, progress, view, track=None, posed=()) -> dict:
+def _simulate(req, body, g, walking, out, progress, view, track=None, posed=(), dress_seconds=None) -> dict:
+    from engine.scene.drape import time_limited
     from engine.scene.request import TryOnOptions, TryOnRequest
     from engine.scene.tryon import dress_request, write_outputs
 
@@ -256,7 +258,11 @@ def _simulate(req, body, g, walking, out, progress, view, track=None, posed=()) 
     # assembly as uploaded); a GarmentCode pattern in its own
     size = (req.get("size") or "M") if catalogue else req.get("size")
     request = TryOnRequest(garment=g["name"] if catalogue else g["file"], size=size, **g.get("dxf", {}), **options)
-    res, report = dress_request(body, request, progress=lambda stage, f, msg: progress(stage, f, retry[0] + msg),
+    dressing = lambda stage, f, msg: progress(stage, f, retry[0] + msg)  # noqa: E731
+    if dress_seconds is not None:  # (walking takes the time its length asks: only dressing is limited)
+        dressing = time_limited(dressing, dress_seconds, "the service's limit for dressing one try-on, "
+                                                         "TRYON_DRESS_SECONDS")
+    res, report = dress_request(body, request, progress=dressing,
                                 observer=view, note=note, label=None if catalogue else g.get("label"))
     report["warnings"][:0] = list(posed)
     out.mkdir(parents=True, exist_ok=True)

@@ -34,7 +34,7 @@ from engine.cloth.model import ClothModel, ClothState, build_model, spring_strai
 from engine.cloth.solver import ClothSolver, FireRelaxer
 from engine.cloth.welds import hold_welds, merge_map, seam_gaps
 from engine.collide.base import Collider
-from engine.errors import SimulationError
+from engine.errors import SimulationError, TimeLimitError
 from engine.garment.garment import Garment
 from engine.scene.request import TryOnOptions
 from engine.scene.attach import welded
@@ -55,6 +55,26 @@ Progress = Callable[[str, float, str], None]  # (stage, fraction 0..1, message)
 # (stage, cloth positions (N, 3), triangles (F, 3), body vertices (M, 3) or None when unchanged):
 # called every Tuning.observe_every s of simulated time, e.g. to stream the cloth to a viewer
 Observer = Callable[[str, np.ndarray, np.ndarray, "np.ndarray | None"], None]
+
+
+def time_limited(progress: Progress | None, seconds: float, whose: str) -> Progress:
+    """`progress` (or none) that raises TimeLimitError once `seconds` of wall time have passed
+    since it was made: sewing and draping report progress every few milliseconds of simulated
+    time, so a try-on stops within a step or two of its limit (never a run that goes on for a
+    quarter of an hour on a seam that will not close). `whose`: whose limit it is, for the message."""
+    end, last = time.monotonic() + seconds, ["starting"]
+
+    def limited(stage: str, fraction: float, message: str) -> None:
+        if time.monotonic() > end:
+            raise TimeLimitError(
+                f"stopped after {seconds:g} s ({whose}) while still {stage} ({last[0]}): a pattern this slow "
+                "to sew and drape usually has a part cut too small for the body or seams that do not close; "
+                "a coarser cloth (a larger --resolution, resolution_cm) drapes faster")
+        last[0] = message or stage
+        if progress is not None:
+            progress(stage, fraction, message)
+
+    return limited
 
 
 def dressing_config(request: TryOnOptions, tuning: Tuning, layered: bool = False) -> StepConfig:
