@@ -783,42 +783,6 @@ def test_parts_held_at_the_fabrics_limit_are_sewn_from_a_knit(monkeypatch):
     assert calls == [("cotton", {}), ("jersey", {}), ("stretch_knit", {})], calls
 
 
-@pytest.mark.parametrize("round_cm, then", [(12.0, "rib_knit"), (9.0, None), (16.0, "stretch_knit")])
-def test_a_part_is_sewn_from_the_knit_its_girth_needs(monkeypatch, round_cm, then):
-    """A part held at the first fabric's limit whose ring (engine.scene.girth, measured where the
-    drape stopped: the cuff 12 cm round where the forearm is 18) needs more stretch than
-    stretch_knit gives is sewn from rib_knit at once, not tried in stretch_knit first; one that
-    needs more than even rib_knit gives (9 cm: 100 %) ends the ladder at once with the first
-    refusal, whose words say so; one within stretch_knit's reach (16 cm: 12 %) goes to it."""
-    import engine.scene.tryon as tryon
-    from engine.body import resolve_body
-    from engine.errors import SimulationError
-    from engine.pattern.io import load_pattern
-    from engine.scene.girth import Ring
-
-    calls = []
-
-    def scripted(body, spec, request, tuning, why, panel_fabrics=None, **kw):
-        calls.append(dict(panel_fabrics or {}))
-        if not panel_fabrics:
-            err = SimulationError("sewing stopped closing (cotton)")
-            err.small_part, err.tight_panels = 0.5, ["cuff_f", "cuff_b"]
-            err.rings = [Ring(["cuff_f", "cuff_b"], round_cm / 100, 0.18)]
-            raise err
-        return "drape", {"tight": False, "warnings": [], "fabric_why": why}
-
-    monkeypatch.setattr(tryon, "_run_tryon", scripted)
-    body, spec = resolve_body(str(BODY)), load_pattern(DESIGNS / "mean_female_11_026_specification.json")
-    if then is None:
-        with pytest.raises(SimulationError, match=r"^sewing stopped closing \(cotton\)$"):
-            tryon.run_tryon(body, spec)
-        assert calls == [{}], calls
-        return
-    _, rep = tryon.run_tryon(body, spec)
-    assert calls == [{}, {"cuff_f": then, "cuff_b": then}], calls
-    assert rep["warnings"][0].startswith(f"'cuff_f', 'cuff_b' sewn from {then}, a knit"), rep["warnings"]
-
-
 def test_parts_still_held_in_the_knit_are_sewn_from_a_rib(monkeypatch):
     """Parts held in cotton and, sewn from stretch_knit, held again or stalled open round the limb
     (a cuff cut to the wrist's girth on a sleeve that ends on the forearm: f_smpl 97_010) are sewn

@@ -310,7 +310,7 @@ def sew_and_drape(garment: Garment, collider: Collider | None, request: TryOnOpt
     except SimulationError as e:
         if getattr(e, "stretched_at", None) is not None:  # (too small: which parts, and how far round)
             e.tight_panels = held_panels(garment, model, e.positions, vmap, get_fabric(request.fabric), guard)
-            words, e.rings = _round_words(job, e.positions[vmap] if vmap is not None else e.positions, e.tight_panels)
+            words = _round_words(job, e.positions[vmap] if vmap is not None else e.positions, e.tight_panels)
             msg, tail = str(e), "; try a larger size"
             if words and msg.endswith(tail):
                 e.args = (msg[:-len(tail)] + words + tail,) + tuple(e.args[1:])
@@ -629,12 +629,12 @@ def _open_seams(job: _Dressing, model: ClothModel, state: ClothState, pull: _Pul
     op = garment.seams[~welded]
     open_panels = sorted({garment.panel_names[p] for p in np.unique(garment.panel[op.ravel()])})
     pinched = pinched_open(garment, welded, gaps)
-    round_, rings = _round_words(job, state.x, small[2]) if small and not crotch else (None, [])
+    round_ = _round_words(job, state.x, small[2]) if small and not crotch else None
     why = (crotch if crotch else f"{small[0]}: that part is too small for this body{round_ or ''} (try a larger "
            "size)" if small else _pinched_why(pinched) if pinched else OPEN_WHY)
     err = SimulationError(f"sewing {when}{again}; open seams: {names}. {why}")
     if cause and not crotch:  # (a fit, not the sewing: engine.scene.tryon drapes it in a stretchier knit)
-        err.small_part, err.tight_panels, err.rings = small[1], small[2], rings
+        err.small_part, err.tight_panels = small[1], small[2]
     if crotch:  # (reach, the tops' height, the body's centre x and length, m: tryon lowers the garment)
         err.crotch = short
     err.positions, err.triangles = state.x.copy(), _triangles(model)  # for a picture
@@ -660,16 +660,16 @@ def _stalls_at(garment: Garment, welded: np.ndarray, gaps: np.ndarray, names: li
     return bool(at.any() and gaps[at].max() >= SMALL_STALL * gaps[open_].max())
 
 
-def _round_words(job: _Dressing, x: np.ndarray, names: list[str]) -> tuple[str | None, list]:
+def _round_words(job: _Dressing, x: np.ndarray, names: list[str]) -> str | None:
     """"; at 'cuff_f', 'cuff_b' the cloth is 16.6 cm round (at rest) where the body is 29.3 cm
     round ..." (engine.scene.girth; x: (garment vertices, 3)), or None where the body is not known,
-    no part is named or none wraps it; and the rings (engine.scene.girth.Ring) it says."""
+    no part is named or none wraps it."""
     if job.body is None or not names:
-        return None, []
+        return None
     rings = part_girths(job.garment, x, names, job.body.verts, job.body.faces)
     top = max(FABRICS.values(), key=lambda f: f.strain_threshold)
     words = girth_words(rings, (top.name, top.strain_threshold))
-    return (f"; {words}" if words else None), rings
+    return f"; {words}" if words else None
 
 
 def pinched_outlines(names: list[str]) -> str:

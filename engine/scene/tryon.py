@@ -146,11 +146,7 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
     no new parts but held those in PART_KNIT again, or its seams stalled open at them, once more
     with those in RIB_KNIT (a rib stretches twice as far round; GarmentCode cuts some cuffs to the
     wrist's girth on sleeves that end on the forearm), the others kept in PART_KNIT, and where
-    that names parts it had not, once more with those in PART_KNIT. Parts whose girth, measured
-    where the drape stopped (engine.scene.girth), needs more stretch than PART_KNIT gives (by
-    NEED_OVER) go to RIB_KNIT at once; where the first drape's part needs more than RIB_KNIT
-    gives, its refusal stands at once (no fabric here closes it) -- parts, never half a garment
-    (PART_SHARE), whose ring the girth reads whole. The knits' drapes keep the
+    that names parts it had not, once more with those in PART_KNIT. The knits' drapes keep the
     parts found in a stretchier knit than theirs (a knit top whose cuffs need a rib). If none
     fits, the first fabric's drape or the stretchiest knit's (tight, noted) or the first's refusal
     stands. Where the first drape was placed lower for a short rise (_run_tryon's drop), every
@@ -191,7 +187,7 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
         named = [n for n in held if n not in parts]
         if k == PART_ROUNDS:  # (the parts held in PART_KNIT too, or stalled open, and no others: in a rib)
             rib = set(held) | (set(getattr(out, "open_panels", ())) & set(parts))
-            if not parts or named or not rib or all(parts.get(n) == RIB_KNIT for n in rib):
+            if not parts or named or not rib:
                 break
             knit, trial, ribbed = RIB_KNIT, {n: RIB_KNIT if n in rib else f for n, f in parts.items()}, True
         elif k > PART_ROUNDS and not (ribbed and named):
@@ -202,13 +198,6 @@ def run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions = TryOnOption
             knit, trial = PART_KNIT, {**parts, **{n: PART_KNIT for n in named}}
         if sum(areas.get(n, 0.0) for n in trial) > PART_SHARE * sum(areas.values()):
             break  # (most of the garment held: it is a garment for a knit, below)
-        need = _ring_need(out, named) if knit == PART_KNIT else None
-        if k == 0 and need is not None and need > get_fabric(RIB_KNIT).strain_threshold + NEED_OVER and \
-                isinstance(first, Exception):
-            raise first  # (its words say how far round, and that no fabric here stretches so far)
-        if need is not None and need > get_fabric(PART_KNIT).strain_threshold + NEED_OVER:
-            # (a part that must stretch round further than PART_KNIT goes, by its girth: in a rib at once)
-            knit, trial, ribbed = RIB_KNIT, {**trial, **{n: RIB_KNIT for n in named}}, True
         parts = trial
         say("sewing", 0.0, f"{said[0]}: draping it again with {_in_fabrics(parts)}")
         out = attempt(request, quick, fabric_why, parts)
@@ -266,18 +255,6 @@ PART_KNIT = "stretch_knit"  # the fabric of the parts run_tryon finds held at th
 RIB_KNIT = "rib_knit"  # ... and of those parts where they are held in PART_KNIT too
 PART_ROUNDS = 2  # drapes with more such parts in PART_KNIT at most (then at most one with some in RIB_KNIT)
 PART_SHARE = 0.25  # ... and those parts at most this share of the garment's cloth (cuffs, bands, a hood)
-RING_PANELS = 4  # a part's ring read whole: a cuff's or band's front and back, with its flounce (a sleeve
-# and the bodice caught on a hand read as 10 cm round where the wrist is 18: f_smpl 251_005)
-NEED_OVER = 0.05  # a part whose girth needs this much more stretch than PART_KNIT's limit goes to RIB_KNIT at
-# once, and one needing this much more than RIB_KNIT's ends the ladder (engine.scene.girth: _ring_need)
-
-
-def _ring_need(out, names: list[str]) -> float | None:
-    """The stretch the tightest ring of the named parts needs to close round the body, as the
-    error of the drape `out` measured it (engine.scene.girth.Ring: cloth at rest against the
-    body's girth where it lies), or None where it measured none."""
-    rings = [r for r in getattr(out, "rings", None) or [] if set(r.panels) & set(names) and len(r.panels) <= RING_PANELS]
-    return max(r.stretch for r in rings) if rings else None
 
 
 def _panel_areas(spec: PatternSpec) -> dict[str, float]:
