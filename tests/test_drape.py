@@ -1251,6 +1251,16 @@ def test_a_crotch_seam_left_open_under_the_body_names_a_rise_too_short():
     pulled = x.copy()
     pulled[[0, 2], 2] = (0.10, 0.07)
     assert said(0.25, pulled) is not None
+    # (and where another pair is open over twice as wide -- shorts' cuffs 30 cm open round a thigh
+    # -- the stall is not the rise's: nothing is said)
+    cuffs = np.vstack([x, [[xc + 0.12, 0.55, 0.15], [xc + 0.12, 0.55, -0.15]]])
+    uv = np.array([[0.0, 0.0], [0.0, 0.25], [0.0, 0.0], [0.0, 0.25], [0.0, 0.0], [0.1, 0.0]])
+    garment = SimpleNamespace(panel=np.array([0, 0, 1, 1, 2, 2]), uv=uv, seams=np.array([[0, 2], [4, 5]]))
+    assert _crotch_short(SimpleNamespace(body=bvh, garment=garment), SimpleNamespace(x=cuffs), np.zeros(2, bool))[0] \
+        is None
+    cuffs[[4, 5], 2] = (0.05, -0.05)  # (the cuffs' pair 10 cm open, the crotch's 12: the rise is said)
+    assert _crotch_short(SimpleNamespace(body=bvh, garment=garment), SimpleNamespace(x=cuffs), np.zeros(2, bool))[0] \
+        is not None
 
 
 def test_trousers_with_a_waistband_may_be_lowered_a_jumpsuit_may_not():

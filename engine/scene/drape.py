@@ -786,7 +786,8 @@ def _crotch_short(job: _Dressing, state: ClothState, welded: np.ndarray) -> tupl
     CROTCH_BELOW of its lowest point there, one end in front and one behind), whether the cloth
     can reach round it: the flat distance from each side's point up its panel to that panel's top
     (where it is held), front and back together, against the body's outline through the crotch
-    from the height the tops hang at. A rise shorter than CROTCH_SHORT of it is named, with both
+    from the height the tops hang at -- where those pairs are open at least SMALL_STALL as wide as
+    the widest (else the stall is not the rise's). A rise shorter than CROTCH_SHORT of it is named, with both
     lengths, and (reach m, the tops' height m, the body's centre x, the body's length m); else
     (None, None)."""
     if job.body is None:
@@ -815,6 +816,8 @@ def _crotch_short(job: _Dressing, state: ClothState, welded: np.ndarray) -> tupl
         return None, None
     worst = None
     gap = np.linalg.norm(x[pairs[near, 0]] - x[pairs[near, 1]], axis=1)
+    if gap.max() < SMALL_STALL * np.linalg.norm(d, axis=1).max():
+        return None, None  # (the stall is elsewhere: shorts' cuffs 12 cm open round the thighs, the crotch 3 cm)
     for a, b in pairs[near][np.argsort(-gap)[:4]]:  # (the widest four: each pair costs 9 sections of the body)
         reach, tops = 0.0, []
         for v in (a, b):
