@@ -86,7 +86,7 @@ class DrapeTuning:
     # the report says: the next fabric is tried anyway) for knit_tight_after s: such a drape ran to
     # its budget, the strain guard and the body fighting, before it was found tight (35-45 s of
     # wall time on a GarmentCode top that then fit jersey in 2 s)
-    knit_tight_after: float = 1.0
+    knit_tight_after: float = 0.6  # (drapes that fit were tight for 0.37 s at most: docs/tuning.md)
     # where FIRE settles with more than this share of the cloth standing out from the body unheld
     # (engine.scene.drape.standing_out: stand_out_far from it, within 45 degrees of level), the
     # cloth away from the body is let fall with viscous damping until under half as much is left
