@@ -1002,6 +1002,25 @@ def test_a_band_between_a_bodice_and_shorts_is_not_judged_by_its_own_height():
     assert name == "shorts" and ratio < BUNCHED, (ratio, name)
 
 
+def test_a_hood_worn_up_over_the_head_is_not_judged_for_hanging():
+    """A hood rests on the head, 35 cm tall for the 61 cm it could hang from its crown seam
+    (f_smpl 269_022, its dress risen 20 cm to the waist: called bunched): panels whose drape
+    reaches OVER_HEAD above the shoulders are left out of shortest_panel's judging; a collar
+    standing 8 cm above them, and everything where the shoulders are not measured, is judged."""
+    from types import SimpleNamespace
+
+    from engine.scene.tryon import OVER_HEAD, over_the_head
+
+    y = np.concatenate([np.linspace(0.9, 1.40, 11), np.linspace(1.32, 1.67, 11), np.linspace(1.40, 1.48, 11)])
+    x = np.column_stack([np.zeros(33), y, np.zeros(33)])
+    garment = SimpleNamespace(positions=x, panel=np.repeat([0, 1, 2], 11), panel_names=["bodice", "hood", "collar"])
+    res = SimpleNamespace(positions=x, vertex_map=np.arange(33))
+    assert 1.40 + OVER_HEAD < 1.67 and 1.48 < 1.40 + OVER_HEAD
+    assert over_the_head(garment, res, 1.40) == {"hood"}
+    assert over_the_head(garment, res, float("nan")) == set()
+    assert over_the_head(garment, SimpleNamespace(positions=x, vertex_map=None), 1.40) == set()
+
+
 def test_a_ring_tier_laid_out_tall_hangs_its_width_and_is_not_bunched_up():
     """A ruffle tier is a ring sector: GarmentCode lays it out flat and upright, 95 cm tall for a
     17 cm wide ring, and it hangs from its seam to the tier above 17 cm (its width), that seam

@@ -467,13 +467,14 @@ def _run_tryon(body: Body, spec: PatternSpec, request: TryOnOptions, tuning: Tun
     judged = judged_part(garment, lower) if pattern_file else None
     shift = hang_shift(placed, res.positions, res.vertex_map, judged)
     areas = _panel_areas(spec)
+    shoulder_y = _world_height(body, "shoulder_height")
     shrunk = shortest_panel(garment, res, placed,
-                            skip={n for n, a in areas.items() if a < SMALL_PART * sum(areas.values())})
+                            skip={n for n, a in areas.items() if a < SMALL_PART * sum(areas.values())}
+                            | over_the_head(garment, res, shoulder_y))
     vm = res.vertex_map
     part = judged is not None and judged.any() and vm is not None and len(vm) == len(judged)
     fell = fell_off(garment.positions[judged] if part else garment.positions,
-                    res.positions[vm[judged]] if part else res.positions, _world_height(body, "shoulder_height"),
-                    same=bool(part))
+                    res.positions[vm[judged]] if part else res.positions, shoulder_y, same=bool(part))
     if slid(shift, SLID_OFF):  # settled, but not on the body: never written as a result
         raise _slid(body, res, shift, placement_note, crossing_hint(garment))
     if not pattern_file and rode_up(shift, res.strain_max, fab):  # (a pattern file's layout may rise into place)
@@ -996,6 +997,22 @@ def shortest_panel(garment: Garment, res: DrapeResult, placed: np.ndarray | None
     if best is None and skipped:  # (every panel that tall is a small part: none hangs to judge)
         return (np.inf, skipped[0], 0.0, 0.0)
     return best
+
+
+OVER_HEAD = 0.15  # m: a panel whose drape reaches this far above the shoulders lies over the head (over_the_head)
+
+
+def over_the_head(garment: Garment, res: DrapeResult, shoulder_y: float) -> set[str]:
+    """The panels whose drape reaches OVER_HEAD above the shoulders (a hood worn up): they rest
+    on the head rather than hang from their highest seam, so shortest_panel does not judge them
+    (f_smpl 269_022's hood, 35 cm tall over the head for the 61 cm it could hang, was called
+    bunched). None where the body's shoulders are not measured."""
+    vmap = res.vertex_map
+    if not np.isfinite(shoulder_y) or vmap is None or len(vmap) != len(garment.positions):
+        return set()
+    y = res.positions[vmap, 1]
+    return {n for p, n in enumerate(garment.panel_names)
+            if (on := garment.panel == p).any() and float(y[on].max()) > shoulder_y + OVER_HEAD}
 
 
 def _joins(garment: Garment, on: np.ndarray, y: np.ndarray) -> bool:
