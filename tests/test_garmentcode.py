@@ -45,7 +45,7 @@ def test_the_handful_covers_what_it_says():
     names = set().union(*(_panels(p) for p in FILES))
     for part in ("wb_front", "pant_l_cuff_f", "hood", "collar_front", "ins_skirt_front", "sleeve_f", "skirt_panel"):
         assert any(n.startswith(part) or part in n for n in names), part
-    assert len(FILES) == 29
+    assert len(FILES) == 30
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name[:17])
@@ -466,13 +466,13 @@ def test_a_pattern_too_tight_for_cotton_is_draped_in_a_knit():
 
 
 @pytest.mark.integration
-def test_cloth_left_inside_the_feet_by_the_maps_settles_against_the_mesh():
-    """f_smpl 23_017, a gown whose hem pools on the floor round the feet: against the collision
-    maps (5 mm texels round the edges of the feet) it settles with cloth inside the body's mesh
-    (2.3 mm in cotton; 1.1 mm since its gathered seams stopped pushing back while sewn and it
-    drapes in stretch_knit -- under the default DrapeTuning.finish_pen, 1.5 mm, so asked here from
-    0.5 mm); it goes on against the mesh itself until it settles again, shallower, and the report
-    says so."""
+def test_cloth_left_inside_the_body_by_the_maps_settles_against_the_mesh():
+    """f_smpl 277_017, a sleeveless top with a collar: against the collision maps (5 mm texels
+    round the tight curve at the top of the shoulder) it settles with cloth 1.0 mm inside the
+    body's mesh -- under the default DrapeTuning.finish_pen, 1.5 mm, so asked here from 0.5 mm;
+    it goes on against the mesh itself until it settles again, shallower, and the report says so.
+    (f_smpl 23_017, a gown pooling round the feet, was its design until that gown's drape turned
+    out to depend on the machine: docs/tuning.md, finish_pen.)"""
     from dataclasses import replace
 
     from engine.body import resolve_body
@@ -481,7 +481,7 @@ def test_cloth_left_inside_the_feet_by_the_maps_settles_against_the_mesh():
     from engine.scene.tuning import Tuning
     from tests.samples import SMPL_BODY
 
-    spec = load_pattern(DESIGNS / "f_smpl_average_A40_23_017_specification.json")
+    spec = load_pattern(DESIGNS / "f_smpl_average_A40_277_017_specification.json")
     t = Tuning()
     res, rep = run_tryon(resolve_body(str(SMPL_BODY)), spec, tuning=replace(t, drape=replace(t.drape, finish_pen=0.0005)))
     fin = rep["exact_finish"]
@@ -490,7 +490,6 @@ def test_cloth_left_inside_the_feet_by_the_maps_settles_against_the_mesh():
     assert abs(rep["penetration_mm"]["max"] - fin["penetration_mm_after"]) < 0.05, (rep["penetration_mm"], fin)
     assert rep["penetration_mm"]["max"] <= 2.0 and rep["penetration_mm"]["p99"] <= 0.5, rep["penetration_mm"]
     assert rep["settled"] and not rep["tight"], rep["strain"]
-    assert float(res.positions[:, 1].min()) < 0.05  # (the hem on the floor)
 
 
 @pytest.mark.integration
